@@ -1,0 +1,19 @@
+//! GSArt: articulated models (part segmentation, part poses, a kinematic tree of
+//! 1-DOF joints) from a sequence of 3D point clouds, fitted with dynamic 3D Gaussians.
+//!
+//! The core (everything but `web`) is platform-free: it compiles for the host and
+//! for `wasm32-unknown-unknown`, and never touches browser types.
+
+pub mod error;
+pub mod eval;
+pub mod fit;
+pub mod geom;
+pub mod io;
+pub mod kinematics;
+pub mod pipeline;
+pub mod synth;
+
+#[cfg(target_arch = "wasm32")]
+pub mod web;
+
+pub use error::{Error, Result};

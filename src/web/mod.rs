@@ -1,0 +1,1 @@
+//! Thin wasm glue (cfg wasm32): the worker API and the wgpu viewer.
