@@ -1,4 +1,6 @@
 //! Geometry shared by every stage: rigid transforms, rotations, nearest neighbours,
 //! sampling and assignment.
 
+pub mod assignment;
+pub mod knn;
 pub mod se3;
