@@ -1,7 +1,8 @@
 //! Forward kinematics against every bench-dev ground truth: a ground truth converted to
-#![allow(clippy::needless_range_loop)] // parallel arrays indexed by part
 //! a result reproduces the ground-truth relative poses (canonical frames 0 and 4), and
 //! the frame-0 chain of the ground truth does too.
+
+#![allow(clippy::needless_range_loop)] // parallel arrays indexed by part
 
 use std::path::PathBuf;
 
