@@ -3,3 +3,4 @@
 
 pub mod motion_error;
 pub mod rand_index;
+pub mod tree_edit;
