@@ -34,15 +34,12 @@ async function handle(msg) {
   const { id } = msg;
   switch (msg.type) {
     case 'parse': {
-      // One result per file so one bad file never hides the others.
-      for (const f of msg.files) {
-        try {
-          const r = gsart.parse_ply(new Uint8Array(f.bytes), f.name);
-          self.postMessage({ id, type: 'parsed', name: f.name, points: r.points, labels: r.labels ?? null },
-            buffersOf([r.points, r.labels]));
-        } catch (e) {
-          self.postMessage({ id, type: 'parsed', name: f.name, error: errorMessage(e) });
-        }
+      // One entry per file (natural order) so one bad file never hides the others.
+      const out = gsart.parse_plys(msg.files.map((f) => f.name), msg.files.map((f) => new Uint8Array(f.bytes)));
+      for (const r of out) {
+        if (r.error) self.postMessage({ id, type: 'parsed', name: r.name, error: r.error });
+        else self.postMessage({ id, type: 'parsed', name: r.name, points: r.points, labels: r.labels ?? null },
+          buffersOf([r.points, r.labels]));
       }
       self.postMessage({ id, type: 'result' });
       break;
