@@ -4,6 +4,7 @@
 pub mod build;
 pub mod merge;
 pub mod project;
+pub mod refine;
 pub mod screw;
 pub mod spatial;
 pub mod tree;
