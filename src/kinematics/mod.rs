@@ -2,6 +2,7 @@
 //! forward kinematics and joint refinement.
 
 pub mod build;
+pub mod chain;
 pub mod merge;
 pub mod project;
 pub mod refine;
