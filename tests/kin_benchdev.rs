@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use glam::{DMat4, DVec3, Vec3};
 use gsart::io::gt::GroundTruth;
 use gsart::io::result::FitResult;
+use gsart::kinematics::chain::Chain;
 use gsart::kinematics::screw::{axis_angle_deg, point_line_distance};
 use gsart::kinematics::tree::reroot;
 use gsart::kinematics::{build_articulated, KinOptions};
@@ -152,6 +153,23 @@ fn run(seq: &Seq, opts: &KinOptions) -> (FitResult, gsart::kinematics::KinReport
     (res, rep, t0.elapsed().as_secs_f64())
 }
 
+/// The result validates, and its poses are `Chain` forward kinematics of its joints.
+fn assert_fk_consistent(name: &str, res: &FitResult) {
+    res.validate(name).unwrap();
+    let chain = Chain::from_result(res).unwrap();
+    for k in 0..res.frames {
+        let poses = chain
+            .part_poses(&res.root_pose(k).unwrap(), &res.joint_states(k))
+            .unwrap();
+        for (p, m) in poses.iter().enumerate() {
+            assert!(
+                m.abs_diff_eq(res.pose(k, p).unwrap(), 1e-9),
+                "{name} frame {k} part {p}"
+            );
+        }
+    }
+}
+
 fn check(
     seq: &Seq,
     res: &FitResult,
@@ -170,6 +188,7 @@ fn check(
             seq.name, rep.merge_log
         ));
     }
+    assert_fk_consistent(&seq.name, res);
     let e = evaluate(seq, res);
     if e.tree_mismatch != 0 || e.type_errors != 0 || e.max_axis_deg > 5.0 || e.max_pivot > 0.02 {
         failures.push(format!(

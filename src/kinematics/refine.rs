@@ -19,8 +19,8 @@ use glam::{DMat3, DMat4, DVec3, Vec3};
 use rand::{rngs::StdRng, seq::index::sample, SeedableRng};
 use serde::Serialize;
 
+use super::chain::screw_exp;
 use super::project::bfs_order;
-use super::screw::joint_motion;
 use crate::geom::se3::{from_row_major, to_row_major};
 use crate::io::gt::JointType;
 use crate::io::result::FitResult;
@@ -112,8 +112,7 @@ impl Model {
                     let (a, piv) = self.joint_params(x, j);
                     let q = x[self.joint_base(j) + 6 + t];
                     let axis = a.normalize_or(DVec3::Z);
-                    out[p] =
-                        out[self.parent[p] as usize] * joint_motion(self.types[j], axis, piv, q);
+                    out[p] = out[self.parent[p] as usize] * screw_exp(self.types[j], axis, piv, q);
                 }
             }
         }
