@@ -4,7 +4,9 @@
 //! Only conversions live here; every decision is made by the core.
 
 use glam::{DMat3, DMat4, DVec3, Vec3};
-use js_sys::{Array, Float32Array, Float64Array, Function, Object, Reflect, Uint32Array, Uint8Array};
+use js_sys::{
+    Array, Float32Array, Float64Array, Function, Object, Reflect, Uint32Array, Uint8Array,
+};
 use serde::Serialize;
 use wasm_bindgen::prelude::*;
 
@@ -115,7 +117,9 @@ fn options_from_js(options: JsValue) -> Result<FitOptions, JsError> {
 #[wasm_bindgen]
 pub fn parse_plys(names: Vec<String>, buffers: Array) -> Result<Array, JsError> {
     if names.len() != buffers.length() as usize {
-        return Err(JsError::new("parse_plys: names and buffers differ in length"));
+        return Err(JsError::new(
+            "parse_plys: names and buffers differ in length",
+        ));
     }
     let files: Vec<(String, Vec<u8>)> = names
         .into_iter()
@@ -216,7 +220,11 @@ impl Model {
         let mut canonical_points = None;
         if let Ok(value) = serde_json::from_str::<serde_json::Value>(text) {
             if let Some(arr) = value.get(POINTS_KEY).and_then(|v| v.as_array()) {
-                let flat: Vec<f32> = arr.iter().filter_map(|v| v.as_f64()).map(|v| v as f32).collect();
+                let flat: Vec<f32> = arr
+                    .iter()
+                    .filter_map(|v| v.as_f64())
+                    .map(|v| v as f32)
+                    .collect();
                 let n = result.labels[result.canonical_frame].len();
                 if flat.len() != arr.len() || flat.len() != 3 * n {
                     return Err(js_err(crate::Error::input(
@@ -392,7 +400,10 @@ impl Model {
             return Ok(text);
         }
         let c = self.result.canonical_frame;
-        let Some(points) = self.frame_points[c].as_ref().or(self.canonical_points.as_ref()) else {
+        let Some(points) = self.frame_points[c]
+            .as_ref()
+            .or(self.canonical_points.as_ref())
+        else {
             return Ok(text);
         };
         let mut value: serde_json::Value = serde_json::from_str(&text)
@@ -435,17 +446,25 @@ impl Model {
 }
 
 impl Model {
-    fn new(result: FitResult, canonical_points: Option<Vec<Vec3>>, file: &str) -> Result<Model, JsError> {
+    fn new(
+        result: FitResult,
+        canonical_points: Option<Vec<Vec3>>,
+        file: &str,
+    ) -> Result<Model, JsError> {
         let chain = match &result.tree {
-            Some(_) => Some(Chain::from_result(&result).map_err(|e| {
-                JsError::new(&format!("{file}: {e}"))
-            })?),
+            Some(_) => Some(
+                Chain::from_result(&result).map_err(|e| JsError::new(&format!("{file}: {e}")))?,
+            ),
             None => None,
         };
         let inv_poses = result
             .poses
             .iter()
-            .map(|f| f.iter().map(|m| rigid_inverse(&from_row_major(m))).collect())
+            .map(|f| {
+                f.iter()
+                    .map(|m| rigid_inverse(&from_row_major(m)))
+                    .collect()
+            })
             .collect();
         Ok(Model {
             frame_points: vec![None; result.frames],
@@ -472,7 +491,10 @@ impl Model {
             return Ok((p, k));
         }
         let c = self.result.canonical_frame;
-        if let Some(p) = self.frame_points[c].as_ref().or(self.canonical_points.as_ref()) {
+        if let Some(p) = self.frame_points[c]
+            .as_ref()
+            .or(self.canonical_points.as_ref())
+        {
             return Ok((p, c));
         }
         Err(JsError::new(
@@ -588,7 +610,11 @@ fn progress_js(p: &Progress, snap: Option<&crate::pipeline::Snapshot>) -> Object
         let so = Object::new();
         set(&so, "frame", &JsValue::from_f64(s.frame as f64));
         set(&so, "centers", &Float32Array::from(s.centers.as_slice()));
-        set(&so, "rotations", &Float32Array::from(s.rotations.as_slice()));
+        set(
+            &so,
+            "rotations",
+            &Float32Array::from(s.rotations.as_slice()),
+        );
         set(&so, "scales", &Float32Array::from(s.scales.as_slice()));
         set(&so, "labels", &Uint32Array::from(s.labels.as_slice()));
         set(&o, "snapshot", &so);
