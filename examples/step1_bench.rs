@@ -68,6 +68,10 @@ fn main() {
     let mut opts = FitOptions::default();
     let mut fixed_m: Option<usize> = None;
     let mut weights = Weights::default();
+    let mut lr: Option<f64> = None;
+    let mut batch: Option<usize> = None;
+    let mut emd_n: Option<usize> = None;
+    let mut refresh: Option<usize> = None;
     let mut i = 0;
     while i < args.len() {
         let a = args[i].as_str();
@@ -102,6 +106,11 @@ fn main() {
             "--no-cd" => weights.cd = 0.0,
             "--no-sep" => weights.sep = 0.0,
             "--no-split" => weights.split = 0.0,
+            "--lr" => lr = Some(val().parse().expect("lr")),
+            "--batch" => batch = Some(val().parse().expect("batch")),
+            "--emd-n" => emd_n = Some(val().parse().expect("emd-n")),
+            "--refresh" => refresh = Some(val().parse().expect("refresh")),
+            "--flow" => weights.flow = val().parse().expect("flow"),
             "--sep" => weights.sep = val().parse().expect("sep"),
             _ => dirs.push(a.to_string()),
         }
@@ -117,6 +126,18 @@ fn main() {
                 let prep = select::prepare(&seq, &opts).expect("prepare");
                 let mut cfg = FitConfig::new(prep.sched.clone(), prep.occluded, opts.seed);
                 cfg.weights = weights.clone();
+                if let Some(v) = lr {
+                    cfg.sched.lr = v;
+                }
+                if let Some(v) = batch {
+                    cfg.sched.batch = v;
+                }
+                if let Some(v) = emd_n {
+                    cfg.sched.emd_n = v;
+                }
+                if let Some(v) = refresh {
+                    cfg.sched.emd_refresh = v;
+                }
                 let (params, stats) = gsart::fit::fitter::fit_candidate(
                     &prep.data,
                     m,
