@@ -69,6 +69,7 @@ fn main() {
     let mut fixed_m: Option<usize> = None;
     let mut weights = Weights::default();
     let mut lr: Option<f64> = None;
+    let mut notrack = false;
     let mut batch: Option<usize> = None;
     let mut emd_n: Option<usize> = None;
     let mut refresh: Option<usize> = None;
@@ -111,6 +112,7 @@ fn main() {
             "--emd-n" => emd_n = Some(val().parse().expect("emd-n")),
             "--refresh" => refresh = Some(val().parse().expect("refresh")),
             "--flow" => weights.flow = val().parse().expect("flow"),
+            "--no-track" => notrack = true,
             "--sep" => weights.sep = val().parse().expect("sep"),
             _ => dirs.push(a.to_string()),
         }
@@ -126,6 +128,7 @@ fn main() {
                 let prep = select::prepare(&seq, &opts).expect("prepare");
                 let mut cfg = FitConfig::new(prep.sched.clone(), prep.occluded, opts.seed);
                 cfg.weights = weights.clone();
+                cfg.track_init = !notrack;
                 if let Some(v) = lr {
                     cfg.sched.lr = v;
                 }
@@ -177,7 +180,11 @@ fn main() {
         for k in 0..kk {
             let gl = seq.frames[k].labels.as_ref().expect("labels");
             let gl: Vec<u32> = res.working[k].iter().map(|&j| gl[j as usize]).collect();
-            ri += gsart::eval::rand_index::rand_index(&res.labels[k], &gl).expect("ri");
+            let r = gsart::eval::rand_index::rand_index(&res.labels[k], &gl).expect("ri");
+            if std::env::var("VERBOSE").is_ok() {
+                eprintln!("frame {k}: RI {r:.3}");
+            }
+            ri += r;
         }
         ri /= kk as f64;
         // Reconstruction / flow error on canonical frame 0.
@@ -205,6 +212,9 @@ fn main() {
                 y_t.push(y);
             }
             recon += e / pts.len() as f64;
+            if std::env::var("VERBOSE").is_ok() {
+                eprintln!("frame {t}: recon {:.3}", e / pts.len() as f64 * 100.0);
+            }
             if let Some((pp, yp)) = &prev {
                 let mut f = 0.0;
                 for n in 0..pts.len() {
