@@ -971,13 +971,13 @@ fn track_init(
                 .step_by(step)
                 .map(|n| TransferSrc::new(&prev, data.frames[t - 1][n])),
         );
-        for i in 0..m {
+        for (i, pg) in prev.iter().enumerate() {
             let g = ws.gs[t][i];
             let mut cands: Vec<glam::DMat3> = FLIPS
                 .iter()
                 .map(|f| g.r * glam::DMat3::from_diagonal(DVec3::from_array(*f)))
                 .collect();
-            cands.push(prev[i].r);
+            cands.push(pg.r);
             let mut best = (f64::INFINITY, g.r);
             for r in cands {
                 let mut sum = 0.0;
