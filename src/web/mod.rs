@@ -1,1 +1,3 @@
 //! Thin wasm glue (cfg wasm32): the worker API and the wgpu viewer.
+
+pub mod viewer;
