@@ -624,6 +624,7 @@ fn read_ascii_element<R: BufRead>(
                 ),
             )
         })?;
+        let at_eof = !line.ends_with(b"\n");
         let mut tokens = text.split_ascii_whitespace();
         let Some(first) = tokens.next() else {
             continue; // blank line
@@ -641,9 +642,14 @@ fn read_ascii_element<R: BufRead>(
             )
         };
         let next = |tokens: &mut dyn Iterator<Item = &str>| -> Result<f64> {
-            let t = tokens
-                .next()
-                .ok_or_else(|| mismatch("has too few values"))?;
+            let t = tokens.next().ok_or_else(|| {
+                // A short last line without its newline is a cut-off file.
+                if at_eof {
+                    truncated(file, el, idx)
+                } else {
+                    mismatch("has too few values")
+                }
+            })?;
             t.parse::<f64>()
                 .map_err(|_| mismatch(&format!("has a value '{t}' that is not a number")))
         };
