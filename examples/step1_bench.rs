@@ -14,34 +14,11 @@ use gsart::io::gt::GroundTruth;
 use gsart::io::sequence::{Frame, Sequence};
 use gsart::pipeline::{Control, FitOptions, Occlusion, Quality};
 
-/// Fixed bench-dev binary layout (header, then 3×f32 LE + i32 LE per vertex).
 fn read_bench_ply(path: &Path) -> (Vec<Vec3>, Vec<u32>) {
     let bytes = std::fs::read(path).expect("read ply");
-    let hdr_end = bytes
-        .windows(11)
-        .position(|w| w == b"end_header\n")
-        .expect("header")
-        + 11;
-    let header = std::str::from_utf8(&bytes[..hdr_end]).expect("utf8");
-    let n: usize = header
-        .lines()
-        .find_map(|l| {
-            l.strip_prefix("element vertex ")
-                .map(|v| v.trim().parse().expect("count"))
-        })
-        .expect("vertex count");
-    let body = &bytes[hdr_end..];
-    let f = |o: usize| f32::from_le_bytes([body[o], body[o + 1], body[o + 2], body[o + 3]]);
-    let mut pts = Vec::with_capacity(n);
-    let mut lab = Vec::with_capacity(n);
-    for i in 0..n {
-        let o = i * 16;
-        pts.push(Vec3::new(f(o), f(o + 4), f(o + 8)));
-        lab.push(
-            i32::from_le_bytes([body[o + 12], body[o + 13], body[o + 14], body[o + 15]]) as u32,
-        );
-    }
-    (pts, lab)
+    let c = gsart::io::ply::read_ply(&bytes, &path.display().to_string()).expect("ply");
+    let labels = c.labels.expect("part labels");
+    (c.points, labels)
 }
 
 pub fn load(dir: &Path) -> (Sequence, GroundTruth) {
