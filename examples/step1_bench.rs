@@ -46,7 +46,8 @@ fn main() {
     let mut fixed_m: Option<usize> = None;
     let mut weights = Weights::default();
     let mut lr: Option<f64> = None;
-    let mut notrack = false;
+    let mut notrack = true;
+    let mut with_flow = false;
     let mut batch: Option<usize> = None;
     let mut emd_n: Option<usize> = None;
     let mut refresh: Option<usize> = None;
@@ -89,7 +90,8 @@ fn main() {
             "--emd-n" => emd_n = Some(val().parse().expect("emd-n")),
             "--refresh" => refresh = Some(val().parse().expect("refresh")),
             "--flow" => weights.flow = val().parse().expect("flow"),
-            "--no-track" => notrack = true,
+            "--track" => notrack = false,
+            "--with-flow" => with_flow = true,
             "--sep" => weights.sep = val().parse().expect("sep"),
             _ => dirs.push(a.to_string()),
         }
@@ -118,11 +120,19 @@ fn main() {
                 if let Some(v) = refresh {
                     cfg.sched.emd_refresh = v;
                 }
+                let ff = with_flow.then(|| {
+                    gsart::fit::fitter::FlowField::compute(
+                        &prep.data,
+                        &gsart::fit::flow::OtFlow::default(),
+                        256,
+                        opts.seed,
+                    )
+                });
                 let (params, stats) = gsart::fit::fitter::fit_candidate(
                     &prep.data,
                     m,
                     &cfg,
-                    prep.flow.as_ref(),
+                    ff.as_ref().or(prep.flow.as_ref()),
                     &mut |_| Control::Continue,
                 )
                 .expect("fit");
