@@ -10,6 +10,9 @@ pub mod objects;
 pub mod occlusion;
 pub mod shapes;
 pub mod trajectory;
+pub mod write;
+
+pub use write::{write_sequence_dir, write_sequence_dir_with};
 
 use std::fmt;
 use std::str::FromStr;

@@ -315,7 +315,7 @@ pub fn hand() -> ObjectModel {
         "palm",
         vec![
             aabb([-0.047, -0.014, 0.0], [0.047, 0.014, 0.1]),
-            cylinder([0.0, 0.0, -0.04], [0.0, 0.0, 0.005], 0.026), // wrist stub
+            cylinder([0.0, 0.0, -0.025], [0.0, 0.0, 0.005], 0.026), // wrist stub
         ],
     );
     let r = 0.0095;
@@ -327,7 +327,7 @@ pub fn hand() -> ObjectModel {
     ];
     let x_axis = [1.0, 0.0, 0.0];
     for (name, x, s) in fingers {
-        let lens = [0.045 * s, 0.028 * s, 0.022 * s];
+        let lens = [0.052 * s, 0.033 * s, 0.025 * s];
         let ranges = [(0.0, deg(80.0)), (0.0, deg(90.0)), (0.0, deg(70.0))];
         let labels = ["proximal", "middle", "distal"];
         let mut parent = 0;
