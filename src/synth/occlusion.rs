@@ -84,6 +84,18 @@ impl Face {
 /// adjacency-ordered horizons). `None` for fewer than 4 points, a flat set, or a
 /// numerical failure of the hull topology.
 pub fn hull_vertices(pts: &[DVec3]) -> Option<Vec<bool>> {
+    let tris = hull_triangles(pts)?;
+    let mut mask = vec![false; pts.len()];
+    for t in &tris {
+        for &v in t {
+            mask[v] = true;
+        }
+    }
+    Some(mask)
+}
+
+/// Triangles of the convex hull (outward counter-clockwise), see [`hull_vertices`].
+pub fn hull_triangles(pts: &[DVec3]) -> Option<Vec<[usize; 3]>> {
     let n = pts.len();
     if n < 4 || pts.iter().any(|p| !p.is_finite()) {
         return None;
@@ -279,13 +291,7 @@ pub fn hull_vertices(pts: &[DVec3]) -> Option<Vec<bool>> {
             }
         }
     }
-    let mut mask = vec![false; n];
-    for f in faces.iter().filter(|f| f.alive) {
-        for &v in &f.v {
-            mask[v] = true;
-        }
-    }
-    Some(mask)
+    Some(faces.iter().filter(|f| f.alive).map(|f| f.v).collect())
 }
 
 /// Fallback visibility: perspective z-buffer with splats about the point spacing.
@@ -417,6 +423,58 @@ mod tests {
         let mask = hull_vertices(&sphere).unwrap();
         assert_valid_hull(&sphere, &mask);
         assert!(mask.iter().filter(|&&m| m).count() > 2950);
+    }
+
+    /// Full validity: a closed 2-manifold (every directed edge once, its reverse once,
+    /// Euler V − E + F = 2) with every point on the inner side of every face.
+    fn assert_closed_convex(pts: &[DVec3], tris: &[[usize; 3]]) {
+        let mut edges: Vec<(usize, usize)> = tris
+            .iter()
+            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+            .collect();
+        edges.sort_unstable();
+        assert!(edges.windows(2).all(|w| w[0] != w[1]), "repeated directed edge");
+        for &(a, b) in &edges {
+            assert!(edges.binary_search(&(b, a)).is_ok(), "open edge");
+        }
+        let mut verts: Vec<usize> = tris.iter().flatten().copied().collect();
+        verts.sort_unstable();
+        verts.dedup();
+        let (v, e, f) = (verts.len() as i64, edges.len() as i64 / 2, tris.len() as i64);
+        assert_eq!(v - e + f, 2);
+        let scale = pts.iter().map(|p| p.abs().max_element()).fold(0.0, f64::max);
+        for t in tris {
+            let n = (pts[t[1]] - pts[t[0]]).cross(pts[t[2]] - pts[t[0]]).normalize();
+            for p in pts {
+                assert!(n.dot(*p - pts[t[0]]) < 1e-9 * scale);
+            }
+        }
+    }
+
+    #[test]
+    fn hulls_of_flipped_clouds_are_closed_and_convex() {
+        // the HPR use case: a cloud flipped about a camera, plus the camera
+        let mut rng = StdRng::seed_from_u64(8);
+        for trial in 0..4 {
+            let pts: Vec<DVec3> = random_ball(1500, 20 + trial)
+                .into_iter()
+                .map(|p| p * DVec3::new(0.5, 0.1, 0.3))
+                .collect();
+            let cam = DVec3::new(rng.random::<f64>() - 0.5, 2.0, rng.random::<f64>() - 0.5);
+            let r = HPR_RADIUS_FACTOR * 2.5;
+            let mut flipped: Vec<DVec3> = pts
+                .iter()
+                .map(|p| {
+                    let v = *p - cam;
+                    v + v * (2.0 * (r - v.length()) / v.length())
+                })
+                .collect();
+            flipped.push(DVec3::ZERO);
+            let tris = hull_triangles(&flipped).unwrap();
+            assert_closed_convex(&flipped, &tris);
+        }
+        let ball = random_ball(2000, 3);
+        assert_closed_convex(&ball, &hull_triangles(&ball).unwrap());
     }
 
     #[test]
