@@ -26,6 +26,22 @@ use crate::io::gt::{GroundTruth, GtJoint, JointType};
 use crate::io::sequence::{Frame, Sequence};
 use objects::ObjectModel;
 
+/// Trigonometry from the pure-Rust `libm`, so generated sequences are bit-identical
+/// natively and in wasm (std's `sin`/`cos` call the platform's math library).
+pub(crate) fn sin(x: f64) -> f64 {
+    libm::sin(x)
+}
+
+pub(crate) fn cos(x: f64) -> f64 {
+    libm::cos(x)
+}
+
+/// Rotation by `angle` about the unit `axis` (platform-independent, see [`sin`]).
+pub(crate) fn axis_angle(axis: DVec3, angle: f64) -> glam::DQuat {
+    let (s, c) = (sin(angle * 0.5), cos(angle * 0.5));
+    glam::DQuat::from_xyzw(axis.x * s, axis.y * s, axis.z * s, c)
+}
+
 /// The built-in procedural objects.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum ObjectKind {
@@ -449,7 +465,7 @@ pub fn generate(opts: &SynthOptions) -> crate::Result<SynthOutput> {
         let el = trajectory::smooth_states(&mut cam_rng, k, (-0.25, 0.85));
         for (t, frame) in frames.iter_mut().enumerate() {
             let (a, e) = (az0 + az[t], el[t]);
-            let cam = DVec3::new(e.cos() * a.cos(), e.cos() * a.sin(), e.sin()) * 2.0;
+            let cam = DVec3::new(cos(e) * cos(a), cos(e) * sin(a), sin(e)) * 2.0;
             let pts: Vec<DVec3> = frame.points.iter().map(|p| p.as_dvec3()).collect();
             let (mask, m) = occlusion::visible(&pts, cam);
             // Report the weaker method if any frame needed the fallback.

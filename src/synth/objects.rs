@@ -8,7 +8,7 @@
 //! roughly metres; the generator normalises afterwards. Ranges are chosen so that parts
 //! do not pass through each other (checked by hand for the extreme combinations).
 
-use glam::{DMat4, DQuat, DVec3};
+use glam::{DMat4, DVec3};
 
 use super::shapes::{aabb, capsule, cylinder, sphere, Primitive};
 use crate::io::gt::JointType;
@@ -53,7 +53,7 @@ impl JointDef {
         match self.joint_type {
             JointType::Revolute => {
                 DMat4::from_translation(self.pivot)
-                    * DMat4::from_quat(DQuat::from_axis_angle(self.axis, q))
+                    * DMat4::from_quat(super::axis_angle(self.axis, q))
                     * DMat4::from_translation(-self.pivot)
             }
             JointType::Prismatic => DMat4::from_translation(self.axis * q),

@@ -433,18 +433,30 @@ mod tests {
             .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
             .collect();
         edges.sort_unstable();
-        assert!(edges.windows(2).all(|w| w[0] != w[1]), "repeated directed edge");
+        assert!(
+            edges.windows(2).all(|w| w[0] != w[1]),
+            "repeated directed edge"
+        );
         for &(a, b) in &edges {
             assert!(edges.binary_search(&(b, a)).is_ok(), "open edge");
         }
         let mut verts: Vec<usize> = tris.iter().flatten().copied().collect();
         verts.sort_unstable();
         verts.dedup();
-        let (v, e, f) = (verts.len() as i64, edges.len() as i64 / 2, tris.len() as i64);
+        let (v, e, f) = (
+            verts.len() as i64,
+            edges.len() as i64 / 2,
+            tris.len() as i64,
+        );
         assert_eq!(v - e + f, 2);
-        let scale = pts.iter().map(|p| p.abs().max_element()).fold(0.0, f64::max);
+        let scale = pts
+            .iter()
+            .map(|p| p.abs().max_element())
+            .fold(0.0, f64::max);
         for t in tris {
-            let n = (pts[t[1]] - pts[t[0]]).cross(pts[t[2]] - pts[t[0]]).normalize();
+            let n = (pts[t[1]] - pts[t[0]])
+                .cross(pts[t[2]] - pts[t[0]])
+                .normalize();
             for p in pts {
                 assert!(n.dot(*p - pts[t[0]]) < 1e-9 * scale);
             }

@@ -7,6 +7,8 @@ use glam::{DQuat, DVec3};
 use rand::Rng;
 use std::f64::consts::PI;
 
+use super::{cos, sin};
+
 /// One closed surface in a part's local frame.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Primitive {
@@ -72,7 +74,7 @@ fn unit_dir(rng: &mut impl Rng) -> DVec3 {
     let z: f64 = rng.random::<f64>() * 2.0 - 1.0;
     let phi = rng.random::<f64>() * 2.0 * PI;
     let s = (1.0 - z * z).max(0.0).sqrt();
-    DVec3::new(s * phi.cos(), s * phi.sin(), z)
+    DVec3::new(s * cos(phi), s * sin(phi), z)
 }
 
 impl Primitive {
@@ -118,7 +120,7 @@ impl Primitive {
                     let (e1, e2) = axis.any_orthonormal_pair();
                     let t = rng.random::<f64>();
                     let phi = rng.random::<f64>() * 2.0 * PI;
-                    a + (b - a) * t + (e1 * phi.cos() + e2 * phi.sin()) * r
+                    a + (b - a) * t + (e1 * cos(phi) + e2 * sin(phi)) * r
                 } else {
                     // A uniform direction split by hemisphere gives both caps uniformly.
                     let d = unit_dir(rng);
@@ -133,7 +135,7 @@ impl Primitive {
                 let axis = if len > 0.0 { (b - a) / len } else { DVec3::Z };
                 let (e1, e2) = axis.any_orthonormal_pair();
                 let phi = rng.random::<f64>() * 2.0 * PI;
-                let radial = e1 * phi.cos() + e2 * phi.sin();
+                let radial = e1 * cos(phi) + e2 * sin(phi);
                 if rng.random::<f64>() * (side + caps) < side {
                     a + (b - a) * rng.random::<f64>() + radial * r
                 } else {

@@ -41,7 +41,7 @@ pub fn smooth_states(rng: &mut impl Rng, frames: usize, range: (f64, f64)) -> Ve
             let x = t as f64 / seg;
             let i = (x.floor() as usize).min(knots - 2);
             let f = (x - i as f64).clamp(0.0, 1.0);
-            let w = 0.5 - 0.5 * (std::f64::consts::PI * f).cos();
+            let w = 0.5 - 0.5 * super::cos(std::f64::consts::PI * f);
             (values[i] * (1.0 - w) + values[i + 1] * w).clamp(lo, hi)
         })
         .collect()
