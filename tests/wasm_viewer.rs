@@ -285,7 +285,7 @@ async fn frame_time(force_webgl: bool) -> f64 {
     v.render().unwrap();
     v.offscreen_rgba(4, 4).await.unwrap();
     let perf = web_sys::window().unwrap().performance().unwrap();
-    let frames = 20;
+    let frames = 10;
     let t0 = perf.now();
     for i in 0..frames {
         v.orbit(3.0, 0.0);

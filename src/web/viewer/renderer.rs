@@ -12,6 +12,10 @@ use web_sys::HtmlCanvasElement;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth24Plus;
 /// Offscreen read-back format: exact bytes, no sRGB encoding.
 pub const OFFSCREEN_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+/// Points are drawn as plain indexed quads (4 corners each, 6 indices), not
+/// instanced: SwiftShader and some mobile GPUs run one tiny instance at a time
+/// (measured: ~1 s per frame for 40k instanced points, headless Chromium).
+const CORNERS: usize = 4;
 const POINT_STRIDE: u64 = 12;
 const COLOR_STRIDE: u64 = 4;
 /// centre(3) + rotation columns(9) + scale(3) + packed colour(1), as u32 words.
@@ -104,6 +108,11 @@ pub struct Renderer {
     screen: Option<Targets>,
 
     positions: GrowBuffer,
+    quad_indices: GrowBuffer,
+    /// Points the index buffer covers (grows by powers of two).
+    quad_capacity: usize,
+    pos_scratch: Vec<f32>,
+    index_scratch: Vec<u32>,
     colors: GrowBuffer,
     n_points: u32,
     labels: Vec<u32>,
@@ -329,6 +338,10 @@ impl Renderer {
             shader_gauss: shader(&device, "gaussians", include_str!("shaders/gaussians.wgsl")),
             shader_mesh: shader(&device, "mesh", include_str!("shaders/mesh.wgsl")),
             positions: GrowBuffer::new(&device, "point positions", vertex),
+            quad_indices: GrowBuffer::new(&device, "point quads", wgpu::BufferUsages::INDEX),
+            quad_capacity: 0,
+            pos_scratch: Vec::new(),
+            index_scratch: Vec::new(),
             colors: GrowBuffer::new(&device, "point colours", vertex),
             gauss: GrowBuffer::new(&device, "gaussians", vertex),
             axes: GrowBuffer::new(&device, "axes", vertex),
@@ -453,12 +466,12 @@ impl Renderer {
         let point_layout = [
             Some(wgpu::VertexBufferLayout {
                 array_stride: POINT_STRIDE,
-                step_mode: wgpu::VertexStepMode::Instance,
+                step_mode: wgpu::VertexStepMode::Vertex,
                 attributes: &pos_attr,
             }),
             Some(wgpu::VertexBufferLayout {
                 array_stride: COLOR_STRIDE,
-                step_mode: wgpu::VertexStepMode::Instance,
+                step_mode: wgpu::VertexStepMode::Vertex,
                 attributes: &col_attr,
             }),
         ];
@@ -616,11 +629,41 @@ impl Renderer {
                 labels.len()
             ));
         }
-        if n > u32::MAX as usize / 64 {
-            return Err(format!("set_points: {n} points is too many to draw"));
+        let max_points = (self.device.limits().max_buffer_size / (CORNERS as u64 * POINT_STRIDE))
+            .min(u32::MAX as u64 / 8) as usize;
+        if n > max_points {
+            return Err(format!(
+                "set_points: {n} points exceed what this GPU can draw at once ({max_points}); downsample first"
+            ));
         }
-        self.positions
-            .write(&self.device, &self.queue, bytemuck::cast_slice(positions));
+        // Every corner of a quad carries the point's centre; the vertex shader
+        // pushes it out by the corner's offset in pixels.
+        self.pos_scratch.clear();
+        for p in positions.chunks_exact(3) {
+            for _ in 0..CORNERS {
+                self.pos_scratch.extend_from_slice(p);
+            }
+        }
+        self.positions.write(
+            &self.device,
+            &self.queue,
+            bytemuck::cast_slice(&self.pos_scratch),
+        );
+        if n > self.quad_capacity {
+            let cap = n.next_power_of_two();
+            self.index_scratch.clear();
+            for q in 0..cap as u32 {
+                let b = q * CORNERS as u32;
+                self.index_scratch
+                    .extend_from_slice(&[b, b + 1, b + 2, b, b + 2, b + 3]);
+            }
+            self.quad_indices.write(
+                &self.device,
+                &self.queue,
+                bytemuck::cast_slice(&self.index_scratch),
+            );
+            self.quad_capacity = cap;
+        }
         self.n_points = n as u32;
         self.labels.clear();
         self.labels.extend_from_slice(labels);
@@ -679,7 +722,9 @@ impl Renderer {
                     [c[0], c[1], c[2], 255]
                 }
             };
-            self.color_scratch.extend_from_slice(&rgba);
+            for _ in 0..CORNERS {
+                self.color_scratch.extend_from_slice(&rgba);
+            }
         }
         self.colors
             .write(&self.device, &self.queue, &self.color_scratch);
@@ -1003,11 +1048,12 @@ impl Renderer {
             pass.draw(0..self.n_grid_verts, 0..1);
         }
         if self.n_points > 0 {
-            let n = self.n_points as u64;
+            let verts = self.n_points as u64 * CORNERS as u64;
             pass.set_pipeline(&pipes.points);
-            pass.set_vertex_buffer(0, self.positions.buf.slice(..n * POINT_STRIDE));
-            pass.set_vertex_buffer(1, self.colors.buf.slice(..n * COLOR_STRIDE));
-            pass.draw(0..6, 0..self.n_points);
+            pass.set_vertex_buffer(0, self.positions.buf.slice(..verts * POINT_STRIDE));
+            pass.set_vertex_buffer(1, self.colors.buf.slice(..verts * COLOR_STRIDE));
+            pass.set_index_buffer(self.quad_indices.buf.slice(..), wgpu::IndexFormat::Uint32);
+            pass.draw_indexed(0..self.n_points * 6, 0, 0..1);
         }
         if self.n_axes_verts > 0 {
             pass.set_pipeline(&pipes.mesh);
