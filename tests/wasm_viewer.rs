@@ -157,18 +157,29 @@ async fn suite(force_webgl: bool) {
     );
     v.set_points(&pos, &labels).unwrap();
 
-    // Custom colours replace the palette.
+    // Override colours replace the palette (mode 0), mode 1 ignores them, mode
+    // 2 is plain, and new points drop the override.
     let red = [255u8, 0, 0, 255].repeat(300);
     v.set_point_colors(&red).unwrap();
-    v.set_color_mode(1).unwrap();
     let custom = v.offscreen_rgba(W, H).await.unwrap();
     assert!(
         count_near(&custom, &[255, 0, 0], 3) > 40,
-        "{expected}: custom colours not drawn"
+        "{expected}: override colours not drawn"
     );
     assert_eq!(count_near(&custom, &c0, 3), 0);
+    v.set_color_mode(1).unwrap();
+    let by_label = v.offscreen_rgba(W, H).await.unwrap();
+    assert_eq!(count_near(&by_label, &[255, 0, 0], 3), 0);
+    assert!(count_near(&by_label, &c0, 3) > 20);
+    v.set_color_mode(2).unwrap();
+    let plain = v.offscreen_rgba(W, H).await.unwrap();
+    assert_eq!(count_near(&plain, &c0, 3) + count_near(&plain, &c1, 3), 0);
     v.set_color_mode(0).unwrap();
+    v.set_points(&pos, &labels).unwrap();
+    let dropped = v.offscreen_rgba(W, H).await.unwrap();
+    assert_eq!(count_near(&dropped, &[255, 0, 0], 3), 0);
     assert!(v.set_color_mode(7).is_err());
+    assert!(v.set_point_colors(&[1, 2, 3, 4]).is_err());
 
     // Gaussians: two translucent ellipsoids over the clusters change the
     // picture, hiding them restores it.
@@ -238,6 +249,9 @@ fn palette_is_shared_and_distinct() {
     let n = palette_size();
     assert!(n >= 10);
     assert_eq!(palette_color(0), palette_color(n));
+    let table = gsart::web::viewer::part_palette(n + 1);
+    assert_eq!(table.len() as u32, 3 * (n + 1));
+    assert_eq!(&table[3 * n as usize..], palette_color(0).as_slice());
     let c = palette_color(0);
     assert_eq!(
         palette_css(0),
@@ -305,12 +319,15 @@ async fn frame_time(force_webgl: bool) -> f64 {
     ms
 }
 
+// Benchmarks (slow on SwiftShader under load): `... --test wasm_viewer -- --include-ignored --nocapture`.
 #[wasm_bindgen_test]
+#[ignore = "benchmark"]
 async fn frame_time_40k_points_webgpu() {
     assert!(frame_time(false).await > 0.0);
 }
 
 #[wasm_bindgen_test]
+#[ignore = "benchmark"]
 async fn frame_time_40k_points_webgl2() {
     assert!(frame_time(true).await > 0.0);
 }

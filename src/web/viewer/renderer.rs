@@ -21,8 +21,11 @@ const COLOR_STRIDE: u64 = 4;
 /// centre(3) + rotation columns(9) + scale(3) + packed colour(1), as u32 words.
 const GAUSS_WORDS: usize = 16;
 /// Colour modes of `set_color_mode`.
-pub const COLOR_BY_LABEL: u32 = 0;
-pub const COLOR_CUSTOM: u32 = 1;
+/// Override colours when the page gave some for the current points, else by label.
+pub const COLOR_AUTO: u32 = 0;
+/// Always by label, ignoring override colours.
+pub const COLOR_BY_LABEL: u32 = 1;
+/// One neutral grey.
 pub const COLOR_PLAIN: u32 = 2;
 
 #[repr(C)]
@@ -361,7 +364,7 @@ impl Renderer {
             labels: Vec::new(),
             custom_colors: Vec::new(),
             color_scratch: Vec::new(),
-            color_mode: COLOR_BY_LABEL,
+            color_mode: COLOR_AUTO,
             point_size: 4.0,
             dpr: 1.0,
             sphere_vb,
@@ -667,6 +670,8 @@ impl Renderer {
         self.n_points = n as u32;
         self.labels.clear();
         self.labels.extend_from_slice(labels);
+        // Override colours belong to the points they were given for.
+        self.custom_colors.clear();
         self.point_bounds = bounds_of(positions);
         if self.scene_bounds.is_none() && self.point_bounds.is_some() {
             self.scene_bounds = self.point_bounds;
@@ -677,13 +682,15 @@ impl Renderer {
         Ok(())
     }
 
-    /// Per-point RGBA8 colours for [`COLOR_CUSTOM`]; points beyond the given
-    /// colours fall back to their label colour.
+    /// Override colours (RGBA8, one per current point) shown instead of the
+    /// label colours in [`COLOR_AUTO`] mode until the next `set_points`; empty
+    /// clears the override.
     pub fn set_point_colors(&mut self, rgba: &[u8]) -> Result<(), String> {
-        if !rgba.len().is_multiple_of(4) {
+        if !rgba.is_empty() && rgba.len() != 4 * self.n_points as usize {
             return Err(format!(
-                "set_point_colors: {} bytes is not RGBA (a multiple of 4)",
-                rgba.len()
+                "set_point_colors: {} bytes for {} points (need 4 RGBA bytes per point)",
+                rgba.len(),
+                self.n_points
             ));
         }
         self.custom_colors.clear();
@@ -695,7 +702,7 @@ impl Renderer {
     pub fn set_color_mode(&mut self, mode: u32) -> Result<(), String> {
         if mode > COLOR_PLAIN {
             return Err(format!(
-                "set_color_mode: unknown mode {mode} (0 = by part, 1 = custom colours, 2 = plain)"
+                "set_color_mode: unknown mode {mode} (0 = override colours or part, 1 = part, 2 = plain)"
             ));
         }
         self.color_mode = mode;
@@ -709,7 +716,7 @@ impl Renderer {
         for i in 0..n {
             let label = self.labels.get(i).copied().unwrap_or(u32::MAX);
             let rgba = match self.color_mode {
-                COLOR_CUSTOM if 4 * i + 4 <= self.custom_colors.len() => {
+                COLOR_AUTO if 4 * i + 4 <= self.custom_colors.len() => {
                     let c = &self.custom_colors[4 * i..4 * i + 4];
                     [c[0], c[1], c[2], 255]
                 }
@@ -1128,7 +1135,9 @@ impl Renderer {
         let idx = self.pipelines_for(OFFSCREEN_FORMAT);
         let saved = self.camera.viewport;
         self.camera.set_viewport(width as f32, height as f32);
-        self.write_globals((width, height), false, self.point_size);
+        // Same look as the canvas, scaled to the image: a 2× screenshot gets 2× points.
+        let scale = height as f32 / self.camera.viewport[1].max(1.0);
+        self.write_globals((width, height), false, self.point_size * scale);
         self.camera.viewport = saved;
 
         let texture = self.device.create_texture(&wgpu::TextureDescriptor {
