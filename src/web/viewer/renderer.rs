@@ -700,7 +700,7 @@ impl Renderer {
     }
 
     pub fn set_color_mode(&mut self, mode: u32) -> Result<(), String> {
-        if mode > COLOR_PLAIN {
+        if !matches!(mode, COLOR_AUTO | COLOR_BY_LABEL | COLOR_PLAIN) {
             return Err(format!(
                 "set_color_mode: unknown mode {mode} (0 = override colours or part, 1 = part, 2 = plain)"
             ));
