@@ -208,6 +208,45 @@ async fn suite(force_webgl: bool) {
         .set_gaussians(&[0.0; 3], &[0.0; 8], &[0.1; 3], &[])
         .is_err());
 
+    // Translucent Gaussians blend back to front whatever their input order:
+    // two spheres on the line of sight, given in both orders, look the same.
+    let state = v.camera_state();
+    v.set_camera_state("t=0,0,0;d=3;y=0;p=0;u=2").unwrap();
+    v.set_points(&[], &[]).unwrap();
+    v.set_gaussians_visible(true);
+    let eye = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    let rots = [eye, eye].concat();
+    let scales = [0.2f32; 6];
+    let centre = |img: &[u8]| {
+        let i = 4 * ((H / 2) * W + W / 2) as usize;
+        [img[i], img[i + 1], img[i + 2]]
+    };
+    v.set_gaussians(&[0.5, 0.0, 0.0, -0.5, 0.0, 0.0], &rots, &scales, &[0, 1])
+        .unwrap();
+    let near_first = centre(&v.offscreen_rgba(W, H).await.unwrap());
+    v.set_gaussians(&[-0.5, 0.0, 0.0, 0.5, 0.0, 0.0], &rots, &scales, &[1, 0])
+        .unwrap();
+    let far_first = centre(&v.offscreen_rgba(W, H).await.unwrap());
+    assert!(
+        near(&near_first, &far_first, 2),
+        "{expected}: blend depends on input order: {near_first:?} vs {far_first:?}"
+    );
+    // Exactly "near over (far over background)" at alpha 0.35, fully lit at the centre.
+    let (cn, cf) = (palette_color(0), palette_color(1));
+    let want: Vec<u8> = (0..3)
+        .map(|k| {
+            let far_over = 0.35 * cf[k] as f32 + 0.65 * BACKGROUND[k] as f32;
+            (0.35 * cn[k] as f32 + 0.65 * far_over).round() as u8
+        })
+        .collect();
+    assert!(
+        near(&near_first, &want, 4),
+        "{expected}: blend {near_first:?}, want near-over-far {want:?}"
+    );
+    v.set_gaussians(&[], &[], &[], &[]).unwrap();
+    v.set_points(&pos, &labels).unwrap();
+    v.set_camera_state(&state).unwrap();
+
     // A joint axis above the cloud is drawn; a highlighted prismatic arrow differs.
     v.set_axes(&[0.0, 0.0, 0.3], &[1.0, 0.0, 0.0], &[0], -1)
         .unwrap();

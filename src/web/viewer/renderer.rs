@@ -132,6 +132,9 @@ pub struct Renderer {
     gauss: GrowBuffer,
     n_gauss: u32,
     gauss_scratch: Vec<u32>,
+    /// (depth key, index) and the instance words in back-to-front order.
+    gauss_order: Vec<(f32, u32)>,
+    gauss_sorted: Vec<u32>,
     gauss_visible: bool,
 
     axes: GrowBuffer,
@@ -373,6 +376,8 @@ impl Renderer {
             small_sphere: mesh::icosphere(1),
             n_gauss: 0,
             gauss_scratch: Vec::new(),
+            gauss_order: Vec::new(),
+            gauss_sorted: Vec::new(),
             gauss_visible: true,
             n_axes_verts: 0,
             axes_scratch: Vec::new(),
@@ -805,13 +810,43 @@ impl Renderer {
             let part = parts.get(k).copied().unwrap_or(k as u32);
             self.gauss_scratch.push(palette::pack(palette::color(part)));
         }
+        self.n_gauss = m as u32;
+        self.sort_gaussians();
+        Ok(())
+    }
+
+    /// Upload the Gaussians farthest-first for the current camera, so the
+    /// translucent ellipsoids blend in the right order (no per-frame allocation).
+    fn sort_gaussians(&mut self) {
+        let m = self.n_gauss as usize;
+        if m == 0 {
+            return;
+        }
+        let eye = self.camera.eye();
+        self.gauss_order.clear();
+        for k in 0..m {
+            let w = &self.gauss_scratch[k * GAUSS_WORDS..k * GAUSS_WORDS + 3];
+            let c = Vec3::new(
+                f32::from_bits(w[0]),
+                f32::from_bits(w[1]),
+                f32::from_bits(w[2]),
+            );
+            self.gauss_order
+                .push((-(c - eye).length_squared(), k as u32));
+        }
+        self.gauss_order
+            .sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        self.gauss_sorted.clear();
+        for &(_, k) in &self.gauss_order {
+            let k = k as usize;
+            self.gauss_sorted
+                .extend_from_slice(&self.gauss_scratch[k * GAUSS_WORDS..(k + 1) * GAUSS_WORDS]);
+        }
         self.gauss.write(
             &self.device,
             &self.queue,
-            bytemuck::cast_slice(&self.gauss_scratch),
+            bytemuck::cast_slice(&self.gauss_sorted),
         );
-        self.n_gauss = m as u32;
-        Ok(())
     }
 
     pub fn set_gaussians_visible(&mut self, visible: bool) {
@@ -1101,6 +1136,9 @@ impl Renderer {
             self.screen = Some(self.make_targets(w, h, self.config.format));
         }
         let idx = self.pipelines_for(self.config.format);
+        if self.gauss_visible {
+            self.sort_gaussians();
+        }
         self.write_globals(
             (w, h),
             self.config.format.is_srgb(),
@@ -1133,6 +1171,9 @@ impl Renderer {
             ));
         }
         let idx = self.pipelines_for(OFFSCREEN_FORMAT);
+        if self.gauss_visible {
+            self.sort_gaussians();
+        }
         let saved = self.camera.viewport;
         self.camera.set_viewport(width as f32, height as f32);
         // Same look as the canvas, scaled to the image: a 2× screenshot gets 2× points.
