@@ -63,12 +63,18 @@ fn diff_pixels(a: &[u8], b: &[u8]) -> usize {
         .count()
 }
 
-async fn suite(force_webgl: bool) {
+async fn suite(force_webgl: bool, msaa: bool) {
     let v = Viewer::create(canvas(W, H), force_webgl)
         .await
         .unwrap_or_else(|e| panic!("viewer creation failed (force_webgl={force_webgl}): {e:?}"));
     let expected = if force_webgl { "webgl2" } else { "webgpu" };
     assert_eq!(v.backend(), expected);
+    assert_eq!(
+        v.set_msaa(msaa),
+        msaa,
+        "{expected}: MSAA should be available"
+    );
+    assert_eq!(v.sample_count(), if msaa { 4 } else { 1 });
     let (pos, labels) = two_clusters(150, 0.0);
     v.set_points(&pos, &labels).unwrap();
     v.set_point_size(7.0);
@@ -275,12 +281,22 @@ async fn suite(force_webgl: bool) {
 
 #[wasm_bindgen_test]
 async fn webgpu_draws_points_gaussians_axes() {
-    suite(false).await;
+    suite(false, false).await;
+}
+
+#[wasm_bindgen_test]
+async fn webgpu_msaa_draws_points_gaussians_axes() {
+    suite(false, true).await;
 }
 
 #[wasm_bindgen_test]
 async fn webgl2_draws_points_gaussians_axes() {
-    suite(true).await;
+    suite(true, false).await;
+}
+
+#[wasm_bindgen_test]
+async fn webgl2_msaa_draws_points_gaussians_axes() {
+    suite(true, true).await;
 }
 
 #[wasm_bindgen_test]
@@ -308,8 +324,9 @@ fn palette_is_shared_and_distinct() {
 /// Frame time for 40k points + 15 Gaussians (printed; only sanity-checked):
 /// on-screen frames at 800×600, with a read-back every few frames so the GPU
 /// work is inside the measurement.
-async fn frame_time(force_webgl: bool) -> f64 {
+async fn frame_time(force_webgl: bool, msaa: bool) -> f64 {
     let v = Viewer::create(canvas(800, 600), force_webgl).await.unwrap();
+    v.set_msaa(msaa);
     v.resize(800.0, 600.0, 1.0);
     let n = 40_000usize;
     let mut pos = Vec::with_capacity(3 * n);
@@ -351,8 +368,9 @@ async fn frame_time(force_webgl: bool) -> f64 {
     let ms = (perf.now() - t0) / frames as f64;
     assert!(v.gpu_errors().is_empty(), "{}", v.gpu_errors());
     console_log!(
-        "frame time {} (800x600, 40k points, 15 Gaussians, MSAA x{}): {ms:.2} ms",
+        "frame time {} [{}] (800x600, 40k points, 15 Gaussians, MSAA x{}): {ms:.2} ms",
         v.backend(),
+        v.adapter_info(),
         v.sample_count()
     );
     ms
@@ -362,11 +380,13 @@ async fn frame_time(force_webgl: bool) -> f64 {
 #[wasm_bindgen_test]
 #[ignore = "benchmark"]
 async fn frame_time_40k_points_webgpu() {
-    assert!(frame_time(false).await > 0.0);
+    assert!(frame_time(false, false).await > 0.0);
+    assert!(frame_time(false, true).await > 0.0);
 }
 
 #[wasm_bindgen_test]
 #[ignore = "benchmark"]
 async fn frame_time_40k_points_webgl2() {
-    assert!(frame_time(true).await > 0.0);
+    assert!(frame_time(true, false).await > 0.0);
+    assert!(frame_time(true, true).await > 0.0);
 }

@@ -52,9 +52,20 @@ impl Viewer {
         self.inner.borrow().backend().to_string()
     }
 
+    /// Graphics adapter as the browser reports it (name, device type, driver).
+    pub fn adapter_info(&self) -> String {
+        self.inner.borrow().adapter_info().to_string()
+    }
+
     /// MSAA sample count in use (4, or 1 where multisampling is unavailable).
     pub fn sample_count(&self) -> u32 {
         self.inner.borrow().sample_count()
+    }
+
+    /// Turn 4× multisampling on or off; returns whether it is on (it stays off
+    /// where unsupported). Default: on, except on software renderers.
+    pub fn set_msaa(&self, on: bool) -> bool {
+        self.inner.borrow_mut().set_msaa(on)
     }
 
     /// GPU validation errors so far, newline-separated ("" when none).

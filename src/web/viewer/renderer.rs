@@ -12,10 +12,11 @@ use web_sys::HtmlCanvasElement;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth24Plus;
 /// Offscreen read-back format: exact bytes, no sRGB encoding.
 pub const OFFSCREEN_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
-/// Points are drawn as plain indexed quads (4 corners each, 6 indices), not
-/// instanced: SwiftShader and some mobile GPUs run one tiny instance at a time
-/// (measured: ~1 s per frame for 40k instanced points, headless Chromium).
-const CORNERS: usize = 4;
+/// Points are drawn as one plain (non-instanced) triangle each that circumscribes
+/// the disk: SwiftShader and some mobile GPUs run one tiny instance at a time
+/// (measured in headless Chromium, 40k points: ~1 s per frame instanced,
+/// ~0.3–0.6 s as indexed quads, less as triangles — vertex work dominates).
+const CORNERS: usize = 3;
 const POINT_STRIDE: u64 = 12;
 const COLOR_STRIDE: u64 = 4;
 /// centre(3) + rotation columns(9) + scale(3) + packed colour(1), as u32 words.
@@ -100,7 +101,9 @@ pub struct Renderer {
     surface: wgpu::Surface<'static>,
     config: wgpu::SurfaceConfiguration,
     backend: &'static str,
+    adapter_info: String,
     sample_count: u32,
+    msaa_supported: bool,
     layout: wgpu::PipelineLayout,
     globals_buf: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
@@ -111,11 +114,7 @@ pub struct Renderer {
     screen: Option<Targets>,
 
     positions: GrowBuffer,
-    quad_indices: GrowBuffer,
-    /// Points the index buffer covers (grows by powers of two).
-    quad_capacity: usize,
     pos_scratch: Vec<f32>,
-    index_scratch: Vec<u32>,
     colors: GrowBuffer,
     n_points: u32,
     labels: Vec<u32>,
@@ -277,10 +276,11 @@ impl Renderer {
         };
         surface.configure(&device, &config);
 
-        let sample_count = if msaa_ok(&adapter, format)
+        let msaa_supported = msaa_ok(&adapter, format)
             && msaa_ok(&adapter, OFFSCREEN_FORMAT)
-            && msaa_ok(&adapter, DEPTH_FORMAT)
-        {
+            && msaa_ok(&adapter, DEPTH_FORMAT);
+        // Software rasterisers (SwiftShader) pay dearly for MSAA: off there by default.
+        let sample_count = if msaa_supported && info.device_type != wgpu::DeviceType::Cpu {
             4
         } else {
             1
@@ -344,10 +344,7 @@ impl Renderer {
             shader_gauss: shader(&device, "gaussians", include_str!("shaders/gaussians.wgsl")),
             shader_mesh: shader(&device, "mesh", include_str!("shaders/mesh.wgsl")),
             positions: GrowBuffer::new(&device, "point positions", vertex),
-            quad_indices: GrowBuffer::new(&device, "point quads", wgpu::BufferUsages::INDEX),
-            quad_capacity: 0,
             pos_scratch: Vec::new(),
-            index_scratch: Vec::new(),
             colors: GrowBuffer::new(&device, "point colours", vertex),
             gauss: GrowBuffer::new(&device, "gaussians", vertex),
             axes: GrowBuffer::new(&device, "axes", vertex),
@@ -357,7 +354,9 @@ impl Renderer {
             surface,
             config,
             backend,
+            adapter_info: format!("{} ({:?}, {})", info.name, info.device_type, info.driver),
             sample_count,
+            msaa_supported,
             layout,
             globals_buf,
             bind_group,
@@ -400,8 +399,24 @@ impl Renderer {
         self.backend
     }
 
+    pub fn adapter_info(&self) -> &str {
+        &self.adapter_info
+    }
+
     pub fn sample_count(&self) -> u32 {
         self.sample_count
+    }
+
+    /// Turn 4× MSAA on or off (where supported); returns whether it is on.
+    pub fn set_msaa(&mut self, on: bool) -> bool {
+        let count = if on && self.msaa_supported { 4 } else { 1 };
+        if count != self.sample_count {
+            self.sample_count = count;
+            // Pipelines and attachments are built for one sample count.
+            self.pipelines.clear();
+            self.screen = None;
+        }
+        self.sample_count > 1
     }
 
     /// GPU validation errors seen so far (empty when all is well).
@@ -657,21 +672,6 @@ impl Renderer {
             &self.queue,
             bytemuck::cast_slice(&self.pos_scratch),
         );
-        if n > self.quad_capacity {
-            let cap = n.next_power_of_two();
-            self.index_scratch.clear();
-            for q in 0..cap as u32 {
-                let b = q * CORNERS as u32;
-                self.index_scratch
-                    .extend_from_slice(&[b, b + 1, b + 2, b, b + 2, b + 3]);
-            }
-            self.quad_indices.write(
-                &self.device,
-                &self.queue,
-                bytemuck::cast_slice(&self.index_scratch),
-            );
-            self.quad_capacity = cap;
-        }
         self.n_points = n as u32;
         self.labels.clear();
         self.labels.extend_from_slice(labels);
@@ -1094,8 +1094,7 @@ impl Renderer {
             pass.set_pipeline(&pipes.points);
             pass.set_vertex_buffer(0, self.positions.buf.slice(..verts * POINT_STRIDE));
             pass.set_vertex_buffer(1, self.colors.buf.slice(..verts * COLOR_STRIDE));
-            pass.set_index_buffer(self.quad_indices.buf.slice(..), wgpu::IndexFormat::Uint32);
-            pass.draw_indexed(0..self.n_points * 6, 0, 0..1);
+            pass.draw(0..self.n_points * CORNERS as u32, 0..1);
         }
         if self.n_axes_verts > 0 {
             pass.set_pipeline(&pipes.mesh);
