@@ -390,3 +390,60 @@ async fn frame_time_40k_points_webgl2() {
     assert!(frame_time(true, false).await > 0.0);
     assert!(frame_time(true, true).await > 0.0);
 }
+
+/// A canvas that already has a 2D context cannot give WebGL2 (or WebGPU): the
+/// viewer must reject with a readable message, not panic.
+#[wasm_bindgen_test]
+async fn unusable_canvas_gives_a_clear_error() {
+    for force_webgl in [true, false] {
+        let c = canvas(64, 64);
+        assert!(c.get_context("2d").unwrap().is_some());
+        let err = match Viewer::create(c, force_webgl).await {
+            Ok(v) => panic!("created a {} viewer on a 2D canvas", v.backend()),
+            Err(e) => e,
+        };
+        let text = js_sys::Error::from(err)
+            .message()
+            .as_string()
+            .unwrap_or_default();
+        assert!(
+            text.contains("3D view cannot start"),
+            "force_webgl={force_webgl}: unclear error: {text}"
+        );
+    }
+}
+
+/// Pointer and wheel input move the camera (and report it so the page redraws).
+#[wasm_bindgen_test]
+async fn pointer_and_wheel_input_move_the_camera() {
+    let v = Viewer::create(canvas(W, H), true).await.unwrap();
+    let (pos, labels) = two_clusters(50, 0.0);
+    v.set_points(&pos, &labels).unwrap();
+    v.reset_view();
+    let s0 = v.camera_state();
+    v.pointer_down(1, 50.0, 50.0, 0, false);
+    assert!(v.pointer_move(1, 80.0, 60.0));
+    v.pointer_up(1);
+    assert!(!v.pointer_move(1, 90.0, 60.0), "no drag after pointer up");
+    let s1 = v.camera_state();
+    assert_ne!(s0, s1);
+    // Two fingers spreading apart zoom in (the distance field shrinks).
+    let dist = |s: &str| -> f32 {
+        s.split(';')
+            .find_map(|f| f.strip_prefix("d="))
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    v.pointer_down(2, 40.0, 60.0, 0, false);
+    v.pointer_down(3, 80.0, 60.0, 0, false);
+    v.pointer_move(3, 120.0, 60.0);
+    v.pointer_cancel();
+    let s2 = v.camera_state();
+    assert!(dist(&s2) < dist(&s1), "{s1} -> {s2}");
+    v.wheel(200.0);
+    assert!(dist(&v.camera_state()) > dist(&s2));
+    v.frame_object();
+    v.pan(10.0, 0.0);
+    assert_ne!(v.camera_state(), s2);
+}
