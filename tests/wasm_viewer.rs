@@ -447,3 +447,54 @@ async fn pointer_and_wheel_input_move_the_camera() {
     v.pan(10.0, 0.0);
     assert_ne!(v.camera_state(), s2);
 }
+
+/// The on-screen canvas shows the same colours as the offscreen image (the
+/// canvas format and sRGB handling are right), read back through a 2D canvas
+/// in the same task as the draw.
+async fn on_screen_matches(force_webgl: bool) {
+    let c = canvas(W, H);
+    let v = Viewer::create(c.clone(), force_webgl).await.unwrap();
+    let (pos, labels) = two_clusters(150, 0.0);
+    v.set_points(&pos, &labels).unwrap();
+    v.set_point_size(7.0);
+    v.reset_view();
+    v.resize(W as f32, H as f32, 1.0);
+    v.render().unwrap();
+    let copy = canvas(W, H);
+    let ctx: web_sys::CanvasRenderingContext2d =
+        copy.get_context("2d").unwrap().unwrap().unchecked_into();
+    ctx.draw_image_with_html_canvas_element(&c, 0.0, 0.0)
+        .unwrap();
+    let shown = ctx
+        .get_image_data(0.0, 0.0, W as f64, H as f64)
+        .unwrap()
+        .data()
+        .0;
+    let backend = v.backend();
+    assert!(
+        count_near(&shown, &BACKGROUND, 3) > (W * H / 4) as usize,
+        "{backend}: canvas background wrong"
+    );
+    for i in 0..2 {
+        let n = count_near(&shown, &palette_color(i), 4);
+        assert!(
+            n > 20,
+            "{backend}: palette colour {i} on the canvas {n} times"
+        );
+    }
+    let offscreen = v.offscreen_rgba(W, H).await.unwrap();
+    assert!(
+        diff_pixels(&shown, &offscreen) < (W * H / 20) as usize,
+        "{backend}: canvas and offscreen image differ"
+    );
+}
+
+#[wasm_bindgen_test]
+async fn on_screen_colours_webgpu() {
+    on_screen_matches(false).await;
+}
+
+#[wasm_bindgen_test]
+async fn on_screen_colours_webgl2() {
+    on_screen_matches(true).await;
+}
