@@ -1,2 +1,13 @@
 //! Steps 2 and 3: merging static parts, 1-DOF screw fits, the kinematic tree,
 //! forward kinematics and joint refinement.
+
+pub mod build;
+pub mod chain;
+pub mod merge;
+pub mod project;
+pub mod refine;
+pub mod screw;
+pub mod spatial;
+pub mod tree;
+
+pub use build::{build_articulated, KinOptions, KinReport};

@@ -1,0 +1,7 @@
+#!/usr/bin/env bash
+# Builds the wasm package (skips what is up to date) and serves the page on 127.0.0.1.
+# Usage: npm start [-- PORT]   (or PORT=8080 npm start)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/build-web.sh
+exec node scripts/serve.mjs "$@"

@@ -1,0 +1,241 @@
+//! Steps 2 and 3 end to end: merge static parts → pairwise costs → minimum spanning
+//! tree → joint projection → refinement through forward kinematics.
+//!
+//! Timings come from a caller-supplied clock (seconds): `std::time::Instant` panics on
+//! wasm32, so the core never reads a clock itself.
+
+use glam::{DMat4, DVec3, Vec3};
+use serde::Serialize;
+
+use super::merge::{merge_parts, MergeEvent, MergeOptions};
+use super::project::{motions_from_canonical, project_joints, JointResidual};
+use super::refine::{refine, RefineOptions, RefineReport};
+use super::spatial::pair_distances;
+use super::tree::{least_motion_root, pair_costs, part_motion, spanning_tree};
+use crate::geom::se3::rigid_inverse;
+use crate::io::result::FitResult;
+use crate::pipeline::{Control, Progress, Stage};
+
+/// Options of Steps 2 and 3.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KinOptions {
+    pub merge: MergeOptions,
+    /// Joint limits: state range widened by this fraction on each side.
+    pub limit_pad: f64,
+    /// `None` skips the refinement (projection only).
+    pub refine: Option<RefineOptions>,
+}
+
+impl Default for KinOptions {
+    fn default() -> Self {
+        KinOptions {
+            merge: MergeOptions::default(),
+            limit_pad: 0.0,
+            refine: Some(RefineOptions::default()),
+        }
+    }
+}
+
+/// What Steps 2 and 3 found, for reports and debugging.
+#[derive(Debug, Clone, Serialize)]
+pub struct KinReport {
+    /// Input part → merged part.
+    pub merge_map: Vec<u32>,
+    pub merge_log: Vec<MergeEvent>,
+    /// Point spacing and neighbour radius used for L_spatial / neighbours.
+    pub spacing: f64,
+    pub neighbour_radius: f64,
+    /// Merged parts; `spatial`/`one_dof` are parts × parts, row-major.
+    pub parts: usize,
+    pub spatial: Vec<f64>,
+    pub one_dof: Vec<f64>,
+    /// Motion of each merged part over the sequence (root = least).
+    pub motion: Vec<f64>,
+    pub root: usize,
+    pub parent: Vec<i64>,
+    pub joints: Vec<JointResidual>,
+    pub refine: Option<RefineReport>,
+    /// (stage, seconds) from the caller's clock.
+    pub timings: Vec<(String, f64)>,
+}
+
+fn check_inputs(
+    points: &[Vec<Vec3>],
+    labels: &[Vec<u32>],
+    poses: &[Vec<DMat4>],
+    canonical: usize,
+) -> crate::Result<usize> {
+    let k = points.len();
+    if k < 2 || labels.len() != k || poses.len() != k {
+        return Err(crate::Error::Sequence(format!(
+            "kinematics needs ≥ 2 frames with labels and poses each (got {k} frames, {} label sets, {} pose sets)",
+            labels.len(),
+            poses.len()
+        )));
+    }
+    if canonical >= k {
+        return Err(crate::Error::InvalidArgument(format!(
+            "canonical frame {canonical} ≥ frame count {k}"
+        )));
+    }
+    let parts = poses[0].len();
+    if parts == 0 || poses.iter().any(|f| f.len() != parts) {
+        return Err(crate::Error::Sequence(
+            "part poses: every frame needs the same non-zero number of parts".into(),
+        ));
+    }
+    for (t, (p, l)) in points.iter().zip(labels).enumerate() {
+        if p.len() != l.len() {
+            return Err(crate::Error::Sequence(format!(
+                "frame {t}: {} points but {} labels",
+                p.len(),
+                l.len()
+            )));
+        }
+        if let Some(bad) = l.iter().find(|&&x| x as usize >= parts) {
+            return Err(crate::Error::Sequence(format!(
+                "frame {t}: label {bad} but only {parts} parts have poses"
+            )));
+        }
+        if p.iter().any(|x| !x.is_finite()) {
+            return Err(crate::Error::Sequence(format!(
+                "frame {t}: non-finite point"
+            )));
+        }
+    }
+    if poses.iter().flatten().any(|m| !m.is_finite()) {
+        return Err(crate::Error::Sequence("non-finite part pose".into()));
+    }
+    Ok(parts)
+}
+
+/// Centroid of each part at the canonical frame, pooling every frame's points moved
+/// back to frame c by the part's motion (robust to parts missing in frame c).
+pub fn part_centres(
+    points: &[Vec<Vec3>],
+    labels: &[Vec<u32>],
+    poses: &[Vec<DMat4>],
+    canonical: usize,
+) -> Vec<DVec3> {
+    let parts = poses[0].len();
+    let motions = motions_from_canonical(poses, canonical);
+    let mut sum = vec![DVec3::ZERO; parts];
+    let mut cnt = vec![0usize; parts];
+    for (t, (ps, ls)) in points.iter().zip(labels).enumerate() {
+        let back: Vec<DMat4> = motions[t].iter().map(rigid_inverse).collect();
+        for (x, &l) in ps.iter().zip(ls) {
+            let l = l as usize;
+            sum[l] += back[l].transform_point3(x.as_dvec3());
+            cnt[l] += 1;
+        }
+    }
+    sum.iter()
+        .zip(&cnt)
+        .map(|(s, &c)| if c > 0 { *s / c as f64 } else { DVec3::ZERO })
+        .collect()
+}
+
+fn progress_to(
+    progress: &mut dyn FnMut(&Progress) -> Control,
+    stage: Stage,
+    iter: usize,
+    total: usize,
+    losses: Vec<(String, f64)>,
+) -> crate::Result<()> {
+    let p = Progress {
+        stage,
+        m: None,
+        iter,
+        total,
+        losses,
+        snapshot: None,
+    };
+    match progress(&p) {
+        Control::Continue => Ok(()),
+        Control::Cancel => Err(crate::Error::Cancelled),
+    }
+}
+
+/// Steps 2 and 3 from Step 1's output: working points `points[k]`, their part labels
+/// `labels[k]` and the part poses `poses[k][p]` (only relative motions matter).
+/// Returns the articulated model (labels relabelled to merged parts, one per input
+/// point) and a report. `clock` returns seconds (any origin); `progress` may cancel.
+pub fn build_articulated(
+    points: &[Vec<Vec3>],
+    labels: &[Vec<u32>],
+    poses: &[Vec<DMat4>],
+    canonical: usize,
+    opts: &KinOptions,
+    clock: &dyn Fn() -> f64,
+    progress: &mut dyn FnMut(&Progress) -> Control,
+) -> crate::Result<(FitResult, KinReport)> {
+    let in_parts = check_inputs(points, labels, poses, canonical)?;
+    let mut timings = Vec::new();
+    let t0 = clock();
+    progress_to(progress, Stage::Tree, 0, 3, vec![])?;
+
+    // Merging.
+    let dist_in = pair_distances(points, labels, in_parts, canonical);
+    let mut counts = vec![0usize; in_parts];
+    for l in labels.iter().flatten() {
+        counts[*l as usize] += 1;
+    }
+    let merged = merge_parts(poses, &counts, &dist_in, &opts.merge);
+    let new_labels: Vec<Vec<u32>> = labels
+        .iter()
+        .map(|l| l.iter().map(|&x| merged.map[x as usize]).collect())
+        .collect();
+    let t1 = clock();
+    timings.push(("merge".to_string(), t1 - t0));
+    progress_to(progress, Stage::Tree, 1, 3, vec![])?;
+
+    // Tree.
+    let parts = merged.parts;
+    let dist = pair_distances(points, &new_labels, parts, canonical);
+    let centres = part_centres(points, &new_labels, &merged.poses, canonical);
+    let costs = pair_costs(&merged.poses, &dist, canonical, &centres);
+    let root = least_motion_root(&merged.poses, parts);
+    let parent = spanning_tree(&costs, root);
+    let t2 = clock();
+    timings.push(("tree".to_string(), t2 - t1));
+    progress_to(progress, Stage::Tree, 2, 3, vec![])?;
+
+    // Joints.
+    let (mut result, residuals) = project_joints(
+        &merged.poses,
+        &parent,
+        canonical,
+        &centres,
+        new_labels,
+        opts.limit_pad,
+    )?;
+    let t3 = clock();
+    timings.push(("projection".to_string(), t3 - t2));
+    progress_to(progress, Stage::Joints, 0, 1, vec![])?;
+
+    let refine_report = match &opts.refine {
+        Some(ro) => {
+            let rep = refine(&mut result, points, ro, opts.limit_pad, progress)?;
+            timings.push(("refinement".to_string(), clock() - t3));
+            Some(rep)
+        }
+        None => None,
+    };
+
+    let report = KinReport {
+        merge_map: merged.map,
+        merge_log: merged.log,
+        spacing: dist.spacing,
+        neighbour_radius: dist.radius,
+        parts,
+        spatial: costs.spatial,
+        one_dof: costs.one_dof,
+        motion: (0..parts).map(|p| part_motion(&merged.poses, p)).collect(),
+        root,
+        parent,
+        joints: residuals,
+        refine: refine_report,
+        timings,
+    };
+    Ok((result, report))
+}

@@ -1,0 +1,181 @@
+//! The kinematic tree (paper §3.2): pairwise costs λ_spatial·L_spatial + λ_1DOF·L_1DOF
+//! (λ = 100 and 1), their minimum spanning tree, the root (the part with the least
+//! motion over the sequence) and the parent of every part.
+//!
+//! The MST uses `petgraph::algo::min_spanning_tree` (Kruskal with a union-find) on the
+//! complete graph of the parts: already a dependency, well tested, and P ≤ a few dozen.
+
+use glam::{DMat4, DVec3};
+use petgraph::algo::min_spanning_tree;
+use petgraph::data::Element;
+use petgraph::graph::UnGraph;
+
+use super::screw::{dev_from_identity, fit_screw, relative_motions, ScrewFit};
+use super::spatial::PairDistances;
+use crate::geom::se3::rigid_inverse;
+
+pub const LAMBDA_SPATIAL: f64 = 100.0;
+pub const LAMBDA_1DOF: f64 = 1.0;
+
+/// Pairwise costs between (merged) parts.
+#[derive(Debug, Clone)]
+pub struct PairCosts {
+    pub parts: usize,
+    /// `spatial[i * parts + j]` = L_spatial (symmetric).
+    pub spatial: Vec<f64>,
+    /// `one_dof[i * parts + j]` = L_1DOF of the pair (fitted for i < j, mirrored).
+    pub one_dof: Vec<f64>,
+    /// The screw fit of each pair i < j (`fits[i * parts + j]`), motion of j relative to i.
+    pub fits: Vec<Option<ScrewFit>>,
+}
+
+impl PairCosts {
+    pub fn total(&self, i: usize, j: usize) -> f64 {
+        let k = i * self.parts + j;
+        LAMBDA_SPATIAL * self.spatial[k] + LAMBDA_1DOF * self.one_dof[k]
+    }
+}
+
+/// Pairwise L_spatial and L_1DOF. `centres[p]`: a reference point of part p at frame c
+/// (the centroid of its points), used to place revolute pivots.
+pub fn pair_costs(
+    poses: &[Vec<DMat4>],
+    dist: &PairDistances,
+    canonical: usize,
+    centres: &[DVec3],
+) -> PairCosts {
+    let n = dist.parts;
+    let mut one_dof = vec![0.0; n * n];
+    let mut fits = vec![None; n * n];
+    for i in 0..n {
+        for j in i + 1..n {
+            let rel = relative_motions(poses, i, j, canonical);
+            let f = fit_screw(&rel, centres[j]);
+            one_dof[i * n + j] = f.loss;
+            one_dof[j * n + i] = f.loss;
+            fits[i * n + j] = Some(f);
+        }
+    }
+    // A pair that never shares a frame has ∞ distance; keep it usable but last.
+    let spatial = dist
+        .min_sq
+        .iter()
+        .map(|&v| if v.is_finite() { v } else { 1e6 })
+        .collect();
+    PairCosts {
+        parts: n,
+        spatial,
+        one_dof,
+        fits,
+    }
+}
+
+/// Motion of every part over the sequence: Σₖ ‖Tᵏ⁺¹ (Tᵏ)⁻¹ − I‖²_F.
+pub fn part_motion(poses: &[Vec<DMat4>], p: usize) -> f64 {
+    poses
+        .windows(2)
+        .map(|w| dev_from_identity(&(w[1][p] * rigid_inverse(&w[0][p]))))
+        .sum()
+}
+
+/// The part with the least motion (ties to the lowest index).
+pub fn least_motion_root(poses: &[Vec<DMat4>], parts: usize) -> usize {
+    let mut best = (f64::INFINITY, 0);
+    for p in 0..parts {
+        let m = part_motion(poses, p);
+        // relative tolerance so numerically static parts tie and the lowest index wins
+        if m < best.0 * (1.0 - 1e-9) - 1e-15 {
+            best = (m, p);
+        }
+    }
+    best.1
+}
+
+/// Minimum spanning tree of the pair costs, directed away from `root`.
+/// Returns `parent[p]` (−1 for the root).
+pub fn spanning_tree(costs: &PairCosts, root: usize) -> Vec<i64> {
+    let n = costs.parts;
+    let mut g = UnGraph::<usize, f64>::with_capacity(n, n * (n - 1) / 2);
+    let nodes: Vec<_> = (0..n).map(|p| g.add_node(p)).collect();
+    for i in 0..n {
+        for j in i + 1..n {
+            g.add_edge(nodes[i], nodes[j], costs.total(i, j));
+        }
+    }
+    let mut adj = vec![Vec::new(); n];
+    for e in min_spanning_tree(&g) {
+        if let Element::Edge { source, target, .. } = e {
+            adj[source].push(target);
+            adj[target].push(source);
+        }
+    }
+    let mut parent = vec![-2i64; n];
+    parent[root] = -1;
+    let mut queue = std::collections::VecDeque::from([root]);
+    while let Some(a) = queue.pop_front() {
+        adj[a].sort_unstable();
+        for &b in &adj[a] {
+            if parent[b] == -2 {
+                parent[b] = a as i64;
+                queue.push_back(b);
+            }
+        }
+    }
+    parent
+}
+
+/// Tree edit distance between two rooted trees given as parent arrays over the same
+/// part indices: the number of parts whose parent differs (enough for trees on the same
+/// node set, as in the benchmark's edge comparison).
+pub fn parent_mismatches(a: &[i64], b: &[i64]) -> usize {
+    a.iter().zip(b).filter(|(x, y)| x != y).count()
+}
+
+/// Re-root a tree (parent array) at `root`: reverses the edges on the path.
+pub fn reroot(parent: &[i64], root: usize) -> Vec<i64> {
+    let mut out = parent.to_vec();
+    let mut prev: i64 = -1;
+    let mut cur = root as i64;
+    while cur >= 0 {
+        let next = parent[cur as usize];
+        out[cur as usize] = prev;
+        prev = cur;
+        cur = next;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mst_follows_costs_and_root() {
+        // chain 0 - 1 - 2 by spatial cost
+        let n = 3;
+        let spatial = vec![0.0, 1e-4, 1.0, 1e-4, 0.0, 1e-4, 1.0, 1e-4, 0.0];
+        let costs = PairCosts {
+            parts: n,
+            spatial,
+            one_dof: vec![0.0; 9],
+            fits: vec![None; 9],
+        };
+        assert_eq!(spanning_tree(&costs, 0), vec![-1, 0, 1]);
+        assert_eq!(spanning_tree(&costs, 2), vec![1, 2, -1]);
+        assert_eq!(reroot(&[-1, 0, 1], 2), vec![1, 2, -1]);
+    }
+
+    #[test]
+    fn root_is_least_moving_part() {
+        let poses: Vec<Vec<DMat4>> = (0..4)
+            .map(|t| {
+                vec![
+                    DMat4::from_rotation_x(0.1 * t as f64),
+                    DMat4::IDENTITY,
+                    DMat4::from_translation(DVec3::X * t as f64),
+                ]
+            })
+            .collect();
+        assert_eq!(least_motion_root(&poses, 3), 1);
+    }
+}

@@ -1,0 +1,623 @@
+//! wasm-bindgen API over the core for the page and its workers: PLY parsing,
+//! built-in examples, one Step-1 candidate per worker, finishing (selection and
+//! Steps 2–3), metrics, re-posing through forward kinematics, and exports.
+//! Only conversions live here; every decision is made by the core.
+
+use glam::{DMat3, DMat4, DVec3, Vec3};
+use js_sys::{
+    Array, Float32Array, Float64Array, Function, Object, Reflect, Uint32Array, Uint8Array,
+};
+use serde::Serialize;
+use wasm_bindgen::prelude::*;
+
+use crate::geom::se3::{from_row_major, rigid_inverse};
+use crate::io::gt::JointType;
+use crate::io::ply::write_ply;
+use crate::io::result::FitResult;
+use crate::io::sequence::{natural_cmp, Frame, LoadOptions, Sequence};
+use crate::kinematics::chain::Chain;
+use crate::pipeline::{Control, FitOptions, Progress, Stage};
+use crate::synth::{self, ObjectKind, SynthOptions};
+
+/// Installs the panic hook so a bug shows a readable message in the console.
+#[wasm_bindgen(start)]
+pub fn start() {
+    console_error_panic_hook::set_once();
+}
+
+/// Crate version, shown in the page footer.
+#[wasm_bindgen]
+pub fn version() -> String {
+    env!("CARGO_PKG_VERSION").to_string()
+}
+
+// ------------------------------------------------------------------ conversions
+
+fn js_err(e: crate::Error) -> JsError {
+    JsError::new(&e.to_string())
+}
+
+fn set(obj: &Object, key: &str, value: &JsValue) {
+    // Setting a property on a plain fresh object cannot fail.
+    let _ = Reflect::set(obj, &JsValue::from_str(key), value);
+}
+
+fn to_js<T: Serialize + ?Sized>(v: &T) -> Result<JsValue, JsError> {
+    // json_compatible: maps become plain objects, not `Map`s.
+    v.serialize(&serde_wasm_bindgen::Serializer::json_compatible())
+        .map_err(|e| JsError::new(&format!("internal: cannot convert to JS: {e}")))
+}
+
+fn flat_points(points: &[Vec3]) -> Float32Array {
+    let mut flat = Vec::with_capacity(points.len() * 3);
+    for p in points {
+        flat.extend_from_slice(&[p.x, p.y, p.z]);
+    }
+    Float32Array::from(flat.as_slice())
+}
+
+fn points_from_flat(flat: &[f32], name: &str) -> Result<Vec<Vec3>, JsError> {
+    if flat.len() % 3 != 0 {
+        return Err(js_err(crate::Error::input(
+            name,
+            format!("{} coordinates is not a multiple of 3", flat.len()),
+        )));
+    }
+    Ok(flat
+        .chunks_exact(3)
+        .map(|c| Vec3::new(c[0], c[1], c[2]))
+        .collect())
+}
+
+fn frame_js(frame: &Frame) -> Object {
+    let o = Object::new();
+    set(&o, "name", &JsValue::from_str(&frame.name));
+    set(&o, "points", &flat_points(&frame.points));
+    match &frame.labels {
+        Some(l) => set(&o, "labels", &Uint32Array::from(l.as_slice())),
+        None => set(&o, "labels", &JsValue::NULL),
+    }
+    o
+}
+
+/// A sequence from the page's frames (`Float32Array` xyz per frame) and their names.
+fn sequence_from_js(frames: &Array, names: &Array) -> Result<Sequence, JsError> {
+    let mut out = Vec::with_capacity(frames.length() as usize);
+    for (k, f) in frames.iter().enumerate() {
+        let name = names
+            .get(k as u32)
+            .as_string()
+            .unwrap_or_else(|| format!("frame {k}"));
+        let arr: Float32Array = f
+            .dyn_into()
+            .map_err(|_| JsError::new(&format!("{name}: frame data is not a Float32Array")))?;
+        let points = points_from_flat(&arr.to_vec(), &name)?;
+        out.push(Frame {
+            name,
+            points,
+            labels: None,
+        });
+    }
+    Sequence::from_frames(out).map_err(js_err)
+}
+
+fn options_from_js(options: JsValue) -> Result<FitOptions, JsError> {
+    if options.is_undefined() || options.is_null() {
+        return Ok(FitOptions::default());
+    }
+    serde_wasm_bindgen::from_value(options)
+        .map_err(|e| JsError::new(&format!("invalid fit options: {e}")))
+}
+
+// ------------------------------------------------------------------ loading
+
+/// Parses PLY files given as parallel arrays of names and `Uint8Array` bytes.
+/// Each file gets its own entry `{name, points, labels}` or `{name, error}` (the
+/// error names the file and the problem), in natural filename order.
+#[wasm_bindgen]
+pub fn parse_plys(names: Vec<String>, buffers: Array) -> Result<Array, JsError> {
+    if names.len() != buffers.length() as usize {
+        return Err(JsError::new(
+            "parse_plys: names and buffers differ in length",
+        ));
+    }
+    let files: Vec<(String, Vec<u8>)> = names
+        .into_iter()
+        .zip(buffers.iter())
+        .map(|(n, b)| (n, Uint8Array::new(&b).to_vec()))
+        .collect();
+    let out = Array::new();
+    for (name, result) in Sequence::from_named_bytes(files, LoadOptions::default()) {
+        let o = match result {
+            Ok(frame) => frame_js(&frame),
+            Err(e) => {
+                let o = Object::new();
+                set(&o, "name", &JsValue::from_str(&name));
+                set(&o, "error", &JsValue::from_str(&e.to_string()));
+                o
+            }
+        };
+        out.push(&o);
+    }
+    Ok(out)
+}
+
+/// Indices that put `names` in natural order (`f2` before `f10`), as the core sorts files.
+#[wasm_bindgen]
+pub fn natural_order(names: Vec<String>) -> Vec<u32> {
+    let mut idx: Vec<u32> = (0..names.len() as u32).collect();
+    idx.sort_by(|&a, &b| natural_cmp(&names[a as usize], &names[b as usize]));
+    idx
+}
+
+/// Names of the built-in examples, in menu order.
+#[wasm_bindgen]
+pub fn example_names() -> Vec<String> {
+    synth::example_names()
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+}
+
+/// One-line description of a built-in example (for tooltips).
+#[wasm_bindgen]
+pub fn example_description(name: &str) -> Result<String, JsError> {
+    let kind: ObjectKind = name.parse().map_err(js_err)?;
+    Ok(kind.describe().to_string())
+}
+
+/// Generates a built-in example: `{name, frames: [{name, points, labels}], gt: string,
+/// heldout: [{name, points, labels}]}` (the ground truth as `gt.json` text).
+#[wasm_bindgen]
+pub fn generate_example(name: &str, seed: u64) -> Result<JsValue, JsError> {
+    let kind: ObjectKind = name.parse().map_err(js_err)?;
+    let opts = SynthOptions {
+        seed,
+        ..SynthOptions::new(kind)
+    };
+    let out = synth::generate(&opts).map_err(js_err)?;
+    let o = Object::new();
+    set(&o, "name", &JsValue::from_str(kind.name()));
+    let frames = Array::new();
+    for f in &out.sequence.frames {
+        frames.push(&frame_js(f));
+    }
+    set(&o, "frames", &frames);
+    let heldout = Array::new();
+    for f in &out.heldout {
+        heldout.push(&frame_js(f));
+    }
+    set(&o, "heldout", &heldout);
+    set(&o, "gt", &JsValue::from_str(&synth::gt_json(&out)));
+    Ok(o.into())
+}
+
+// ------------------------------------------------------------------ the model
+
+/// A result opened for viewing: re-posing through the core's forward kinematics
+/// (the same code path as the CLI's `articulate` and the metrics), and exports.
+#[wasm_bindgen]
+pub struct Model {
+    result: FitResult,
+    chain: Option<Chain>,
+    /// Input points per frame when the page has them (labels[k] order).
+    frame_points: Vec<Option<Vec<Vec3>>>,
+    /// Points of the canonical frame carried by the file itself (`canonical_points`).
+    canonical_points: Option<Vec<Vec3>>,
+    /// `inv_poses[k][p]`: inverse of poses[k][p], to bring frame k back to frame c.
+    inv_poses: Vec<Vec<DMat4>>,
+}
+
+/// The extra key the page's export writes so a shared result can be viewed without
+/// its frames: the canonical frame's points, flat xyz (other readers ignore it).
+const POINTS_KEY: &str = "canonical_points";
+
+#[wasm_bindgen]
+impl Model {
+    /// Opens a result JSON (format `gsart-result`, version 1). `file` names it in errors.
+    pub fn from_json(text: &str, file: &str) -> Result<Model, JsError> {
+        let result = FitResult::from_json(text, file).map_err(js_err)?;
+        let mut canonical_points = None;
+        if let Ok(value) = serde_json::from_str::<serde_json::Value>(text) {
+            if let Some(arr) = value.get(POINTS_KEY).and_then(|v| v.as_array()) {
+                let flat: Vec<f32> = arr
+                    .iter()
+                    .filter_map(|v| v.as_f64())
+                    .map(|v| v as f32)
+                    .collect();
+                let n = result.labels[result.canonical_frame].len();
+                if flat.len() != arr.len() || flat.len() != 3 * n {
+                    return Err(js_err(crate::Error::input(
+                        file,
+                        format!("{POINTS_KEY} has {} numbers, expected 3 × {n}", arr.len()),
+                    )));
+                }
+                canonical_points = Some(points_from_flat(&flat, file)?);
+            }
+        }
+        Model::new(result, canonical_points, file)
+    }
+
+    /// Frames K.
+    pub fn frames(&self) -> usize {
+        self.result.frames
+    }
+    /// Parts P.
+    pub fn parts(&self) -> usize {
+        self.result.parts
+    }
+    pub fn canonical_frame(&self) -> usize {
+        self.result.canonical_frame
+    }
+    pub fn has_tree(&self) -> bool {
+        self.chain.is_some()
+    }
+    /// True when points can be shown for every frame (loaded frames or the file's own).
+    pub fn has_points(&self) -> bool {
+        self.canonical_points.is_some() || self.frame_points.iter().all(|f| f.is_some())
+    }
+    /// Root part (0 without a tree).
+    pub fn root(&self) -> usize {
+        self.result.tree.as_ref().map_or(0, |t| t.root)
+    }
+    /// Parent per part (−1 for the root); empty without a tree.
+    pub fn parents(&self) -> Vec<i32> {
+        self.result
+            .tree
+            .as_ref()
+            .map(|t| t.parent.iter().map(|&p| p as i32).collect())
+            .unwrap_or_default()
+    }
+    /// Number of labelled input points of frame k.
+    pub fn label_count(&self, k: usize) -> usize {
+        self.result.labels.get(k).map_or(0, |l| l.len())
+    }
+    /// Joints: `[{child, parent, type, axis, pivot, limits, state}]`.
+    pub fn joints(&self) -> Result<JsValue, JsError> {
+        to_js(self.result.joints.as_deref().unwrap_or(&[]))
+    }
+    pub fn joint_count(&self) -> usize {
+        self.result.joints.as_ref().map_or(0, |j| j.len())
+    }
+    /// The free-form `info` object (options, chosen m, notes), or null.
+    pub fn info(&self) -> Result<JsValue, JsError> {
+        match &self.result.info {
+            Some(v) => to_js(v),
+            None => Ok(JsValue::NULL),
+        }
+    }
+
+    /// Attaches the input points of frame k (they must match `labels[k]`).
+    pub fn set_frame_points(&mut self, k: usize, points: &[f32]) -> Result<(), JsError> {
+        let n = self.label_count(k);
+        if k >= self.result.frames || points.len() != 3 * n {
+            return Err(JsError::new(&format!(
+                "frame {k}: {} coordinates, the result labels {n} points",
+                points.len()
+            )));
+        }
+        self.frame_points[k] = Some(points_from_flat(points, "frame")?);
+        Ok(())
+    }
+
+    /// Joint states of frame k, indexed by child part (0 for parts without a joint).
+    pub fn frame_states(&self, k: usize) -> Vec<f64> {
+        self.result.joint_states(k)
+    }
+
+    /// Labels of the points [`Model::pose_points`] returns for frame k.
+    pub fn labels(&self, k: usize) -> Result<Uint32Array, JsError> {
+        let (_, src) = self.source(k)?;
+        Ok(Uint32Array::from(self.result.labels[src].as_slice()))
+    }
+
+    /// The points of frame k moved to joint states `states` (indexed by child part):
+    /// each point goes back to the canonical frame with its part's fitted pose, then
+    /// forward with the chain's forward kinematics. At the frame's own states this
+    /// reproduces the input.
+    pub fn pose_points(&self, k: usize, states: &[f64]) -> Result<Float32Array, JsError> {
+        let moves = self.part_moves(k, states)?;
+        let (points, src) = self.source(k)?;
+        let labels = &self.result.labels[src];
+        let m32: Vec<glam::Mat4> = moves.iter().map(|m| m.as_mat4()).collect();
+        let mut flat = Vec::with_capacity(points.len() * 3);
+        for (x, &l) in points.iter().zip(labels) {
+            let y = m32[l as usize].transform_point3(*x);
+            flat.extend_from_slice(&[y.x, y.y, y.z]);
+        }
+        Ok(Float32Array::from(flat.as_slice()))
+    }
+
+    /// The Gaussians at frame k re-posed like [`Model::pose_points`]:
+    /// `{centers, rotations (m×9 row-major), scales, parts}`, or null when the result has none.
+    pub fn pose_gaussians(&self, k: usize, states: &[f64]) -> Result<JsValue, JsError> {
+        let Some(gs) = &self.result.gaussians else {
+            return Ok(JsValue::NULL);
+        };
+        let moves = self.part_moves(k, states)?;
+        let n = gs.len();
+        let (mut c, mut r, mut s, mut parts) = (
+            Vec::with_capacity(3 * n),
+            Vec::with_capacity(9 * n),
+            Vec::with_capacity(3 * n),
+            Vec::with_capacity(n),
+        );
+        for g in gs {
+            let (Some(ctr), Some(rot)) = (g.center.get(k), g.rotation.get(k)) else {
+                continue;
+            };
+            let mv = moves[g.part];
+            let y = mv.transform_point3(DVec3::from(*ctr));
+            let rm = DMat3::from_mat4(mv) * DMat3::from_cols_array(rot).transpose();
+            // back to row-major
+            let rows = rm.transpose().to_cols_array();
+            c.extend(y.to_array().iter().map(|&v| v as f32));
+            r.extend(rows.iter().map(|&v| v as f32));
+            s.extend(g.scale.iter().map(|&v| v as f32));
+            parts.push(g.part as u32);
+        }
+        let o = Object::new();
+        set(&o, "centers", &Float32Array::from(c.as_slice()));
+        set(&o, "rotations", &Float32Array::from(r.as_slice()));
+        set(&o, "scales", &Float32Array::from(s.as_slice()));
+        set(&o, "parts", &Uint32Array::from(parts.as_slice()));
+        Ok(o.into())
+    }
+
+    /// Joint axes at frame k and states: `{origins, dirs, kinds (0 revolute, 1
+    /// prismatic), children}`; each axis moves with its parent part.
+    pub fn joint_axes(&self, k: usize, states: &[f64]) -> Result<JsValue, JsError> {
+        let poses = self.poses_at(k, states)?;
+        let joints = self.result.joints.as_deref().unwrap_or(&[]);
+        let (mut o, mut d, mut kinds, mut children) = (vec![], vec![], vec![], vec![]);
+        for j in joints {
+            let Some(t) = poses.get(j.parent) else {
+                continue;
+            };
+            let p = t.transform_point3(DVec3::from(j.pivot));
+            let a = t.transform_vector3(DVec3::from(j.axis)).normalize_or_zero();
+            o.extend(p.to_array().iter().map(|&v| v as f32));
+            d.extend(a.to_array().iter().map(|&v| v as f32));
+            kinds.push(match j.joint_type {
+                JointType::Revolute => 0u32,
+                JointType::Prismatic => 1u32,
+            });
+            children.push(j.child as u32);
+        }
+        let out = Object::new();
+        set(&out, "origins", &Float32Array::from(o.as_slice()));
+        set(&out, "dirs", &Float32Array::from(d.as_slice()));
+        set(&out, "kinds", &Uint32Array::from(kinds.as_slice()));
+        set(&out, "children", &Uint32Array::from(children.as_slice()));
+        Ok(out.into())
+    }
+
+    /// The result JSON; with `with_points`, the canonical frame's points are added under
+    /// `canonical_points` so the file opens on its own (`?model=URL`).
+    pub fn to_json(&self, with_points: bool) -> Result<String, JsError> {
+        let text = self.result.to_json();
+        if !with_points {
+            return Ok(text);
+        }
+        let c = self.result.canonical_frame;
+        let Some(points) = self.frame_points[c]
+            .as_ref()
+            .or(self.canonical_points.as_ref())
+        else {
+            return Ok(text);
+        };
+        let mut value: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| JsError::new(&format!("internal: result JSON: {e}")))?;
+        // 1e-6 of the object's size is far below any sensor noise and keeps files small.
+        let round = |v: f32| ((v as f64) * 1e6).round() / 1e6;
+        let flat: Vec<f64> = points
+            .iter()
+            .flat_map(|p| [round(p.x), round(p.y), round(p.z)])
+            .collect();
+        if let serde_json::Value::Object(map) = &mut value {
+            map.insert(POINTS_KEY.to_string(), serde_json::json!(flat));
+        }
+        serde_json::to_string(&value).map_err(|e| JsError::new(&format!("internal: {e}")))
+    }
+
+    /// Frame k as a binary PLY with `x y z part` (the input points when loaded, else the
+    /// canonical points moved to frame k by the fitted part poses).
+    pub fn segmented_ply(&self, k: usize) -> Result<Uint8Array, JsError> {
+        let (points, src) = self.source(k)?;
+        let labels = &self.result.labels[src];
+        let posed: Vec<Vec3> = if src == k {
+            points.to_vec()
+        } else {
+            // Canonical points carried to frame k by the fitted part poses.
+            let moves: Vec<glam::Mat4> = (0..self.result.parts)
+                .map(|p| self.pose_of(k, p).unwrap_or(DMat4::IDENTITY).as_mat4())
+                .collect();
+            points
+                .iter()
+                .zip(labels)
+                .map(|(x, &l)| moves[l as usize].transform_point3(*x))
+                .collect()
+        };
+        let mut bytes = Vec::new();
+        write_ply(&mut bytes, &posed, Some(labels), false)
+            .map_err(|e| JsError::new(&format!("PLY export: {e}")))?;
+        Ok(Uint8Array::from(bytes.as_slice()))
+    }
+}
+
+impl Model {
+    fn new(
+        result: FitResult,
+        canonical_points: Option<Vec<Vec3>>,
+        file: &str,
+    ) -> Result<Model, JsError> {
+        let chain = match &result.tree {
+            Some(_) => Some(
+                Chain::from_result(&result).map_err(|e| JsError::new(&format!("{file}: {e}")))?,
+            ),
+            None => None,
+        };
+        let inv_poses = result
+            .poses
+            .iter()
+            .map(|f| {
+                f.iter()
+                    .map(|m| rigid_inverse(&from_row_major(m)))
+                    .collect()
+            })
+            .collect();
+        Ok(Model {
+            frame_points: vec![None; result.frames],
+            result,
+            chain,
+            canonical_points,
+            inv_poses,
+        })
+    }
+
+    fn pose_of(&self, k: usize, p: usize) -> Option<DMat4> {
+        self.result.pose(k, p)
+    }
+
+    /// Points shown for frame k and the frame whose labels they carry.
+    fn source(&self, k: usize) -> Result<(&[Vec3], usize), JsError> {
+        if k >= self.result.frames {
+            return Err(JsError::new(&format!(
+                "frame {k} does not exist (the result has {})",
+                self.result.frames
+            )));
+        }
+        if let Some(p) = &self.frame_points[k] {
+            return Ok((p, k));
+        }
+        let c = self.result.canonical_frame;
+        if let Some(p) = self.frame_points[c]
+            .as_ref()
+            .or(self.canonical_points.as_ref())
+        {
+            return Ok((p, c));
+        }
+        Err(JsError::new(
+            "this result carries no points: load its frames to view it",
+        ))
+    }
+
+    /// Part poses (canonical → posed) at frame k's root motion and `states`.
+    fn poses_at(&self, k: usize, states: &[f64]) -> Result<Vec<DMat4>, JsError> {
+        let n = self.result.parts;
+        match &self.chain {
+            Some(chain) => {
+                let root = self.result.root_pose(k).unwrap_or(DMat4::IDENTITY);
+                chain.part_poses(&root, states).map_err(js_err)
+            }
+            // Step 1 only: no joints to move, the fitted poses stand.
+            None => Ok((0..n)
+                .map(|p| self.pose_of(k, p).unwrap_or(DMat4::IDENTITY))
+                .collect()),
+        }
+    }
+
+    /// Per part, the motion applied to the points shown for frame k: back to the
+    /// canonical frame with the fitted pose (when they are frame k's own points),
+    /// then forward kinematics at `states`.
+    fn part_moves(&self, k: usize, states: &[f64]) -> Result<Vec<DMat4>, JsError> {
+        let poses = self.poses_at(k, states)?;
+        let (_, src) = self.source(k)?;
+        Ok(poses
+            .iter()
+            .enumerate()
+            .map(|(p, t)| *t * self.inv_poses[src][p])
+            .collect())
+    }
+}
+
+// ------------------------------------------------------------------ progress
+
+/// Forwards the core's progress to a JS callback at most ~20 times a second (plus
+/// every stage change and the last iteration), keeping the newest snapshot for the
+/// next message sent.
+struct Throttle<'a> {
+    callback: &'a Function,
+    last_sent: f64,
+    last_stage: Option<Stage>,
+    pending: Option<crate::pipeline::Snapshot>,
+}
+
+const MIN_INTERVAL_MS: f64 = 50.0;
+
+impl<'a> Throttle<'a> {
+    fn new(callback: &'a Function) -> Self {
+        Throttle {
+            callback,
+            last_sent: f64::NEG_INFINITY,
+            last_stage: None,
+            pending: None,
+        }
+    }
+
+    fn report(&mut self, p: &Progress) -> Control {
+        let now = js_sys::Date::now();
+        let stage_changed = self.last_stage != Some(p.stage);
+        let last = p.total > 0 && p.iter + 1 >= p.total;
+        if let Some(s) = &p.snapshot {
+            self.pending = Some(s.clone());
+        }
+        if !(stage_changed || last || now - self.last_sent >= MIN_INTERVAL_MS) {
+            return Control::Continue;
+        }
+        self.last_sent = now;
+        self.last_stage = Some(p.stage);
+        let snap = self.pending.take();
+        let msg = progress_js(p, snap.as_ref());
+        // A throwing callback must not abort the fit: log and go on.
+        if let Err(e) = self.callback.call1(&JsValue::NULL, &msg) {
+            web_sys::console::error_2(&JsValue::from_str("progress callback failed"), &e);
+        }
+        Control::Continue
+    }
+}
+
+fn stage_name(s: Stage) -> &'static str {
+    match s {
+        Stage::Load => "load",
+        Stage::Init => "init",
+        Stage::Gaussians => "gaussians",
+        Stage::Select => "select",
+        Stage::Tree => "tree",
+        Stage::Joints => "joints",
+        Stage::Done => "done",
+    }
+}
+
+/// `{stage, m, iter, total, losses: {name: value}, snapshot?: {frame, centers,
+/// rotations, scales, labels}}` with fresh typed arrays the worker can transfer.
+fn progress_js(p: &Progress, snap: Option<&crate::pipeline::Snapshot>) -> Object {
+    let o = Object::new();
+    set(&o, "stage", &JsValue::from_str(stage_name(p.stage)));
+    set(
+        &o,
+        "m",
+        &p.m.map_or(JsValue::NULL, |m| JsValue::from_f64(m as f64)),
+    );
+    set(&o, "iter", &JsValue::from_f64(p.iter as f64));
+    set(&o, "total", &JsValue::from_f64(p.total as f64));
+    let losses = Object::new();
+    for (name, v) in &p.losses {
+        set(&losses, name, &JsValue::from_f64(*v));
+    }
+    set(&o, "losses", &losses);
+    if let Some(s) = snap {
+        let so = Object::new();
+        set(&so, "frame", &JsValue::from_f64(s.frame as f64));
+        set(&so, "centers", &Float32Array::from(s.centers.as_slice()));
+        set(
+            &so,
+            "rotations",
+            &Float32Array::from(s.rotations.as_slice()),
+        );
+        set(&so, "scales", &Float32Array::from(s.scales.as_slice()));
+        set(&so, "labels", &Uint32Array::from(s.labels.as_slice()));
+        set(&o, "snapshot", &so);
+    }
+    o
+}

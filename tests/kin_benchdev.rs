@@ -1,0 +1,200 @@
+//! Steps 2–3 on every bench-dev `full/` sequence with ground-truth labels and poses as
+//! input: the tree must match the ground truth (TED 0 up to the root choice), every
+//! joint type must be right, axes within 5°, revolute pivots within 2% of the object
+//! size, and no two distinct ground-truth parts may be merged.
+
+use glam::{DMat4, DVec3};
+use gsart::io::gt::GroundTruth;
+use gsart::io::result::FitResult;
+use gsart::kinematics::chain::Chain;
+use gsart::kinematics::screw::{axis_angle_deg, point_line_distance};
+use gsart::kinematics::tree::reroot;
+use gsart::kinematics::{build_articulated, KinOptions};
+use gsart::pipeline::Control;
+
+mod kin_common;
+use kin_common::{load, sequences, Seq, BENCH};
+
+struct Errors {
+    tree_mismatch: usize,
+    root: usize,
+    type_errors: usize,
+    max_axis_deg: f64,
+    max_pivot: f64,
+}
+
+fn evaluate(seq: &Seq, res: &FitResult) -> Errors {
+    let gt = &seq.gt;
+    let tree = res.tree.as_ref().unwrap();
+    let gt_rerooted = reroot(&gt.parent, tree.root);
+    let tree_mismatch = gt_rerooted
+        .iter()
+        .zip(&tree.parent)
+        .filter(|(a, b)| a != b)
+        .count();
+    let mut type_errors = 0;
+    let mut max_axis_deg: f64 = 0.0;
+    let mut max_pivot: f64 = 0.0;
+    let c = res.canonical_frame;
+    for j in res.joints.as_ref().unwrap() {
+        // The ground-truth joint of this (undirected) edge.
+        let g = if gt.parent[j.child] == j.parent as i64 {
+            gt.joints[j.child].as_ref()
+        } else if gt.parent[j.parent] == j.child as i64 {
+            gt.joints[j.parent].as_ref()
+        } else {
+            None
+        };
+        let Some(g) = g else { continue };
+        if g.joint_type != j.joint_type {
+            type_errors += 1;
+            continue;
+        }
+        // GT axis/pivot are at frame 0; move them to the canonical frame with the
+        // parent part's motion.
+        let m = gt.poses[c][g.parent_part]
+            * gsart::geom::se3::rigid_inverse(&gt.poses[0][g.parent_part]);
+        let gaxis = m.transform_vector3(g.axis_world_frame0);
+        let gpivot = m.transform_point3(g.pivot_world_frame0);
+        let axis = DVec3::from(j.axis);
+        let pivot = DVec3::from(j.pivot);
+        max_axis_deg = max_axis_deg.max(axis_angle_deg(axis, gaxis));
+        if g.joint_type == gsart::io::gt::JointType::Revolute {
+            let d = point_line_distance(pivot, gpivot, gaxis)
+                .max(point_line_distance(gpivot, pivot, axis));
+            max_pivot = max_pivot.max(d);
+        }
+    }
+    Errors {
+        tree_mismatch,
+        root: tree.root,
+        type_errors,
+        max_axis_deg,
+        max_pivot,
+    }
+}
+
+fn run(seq: &Seq, opts: &KinOptions) -> (FitResult, gsart::kinematics::KinReport, f64) {
+    let t0 = std::time::Instant::now();
+    let (res, rep) = build_articulated(
+        &seq.points,
+        &seq.labels,
+        &seq.gt.poses,
+        0,
+        opts,
+        &|| 0.0,
+        &mut |_| Control::Continue,
+    )
+    .unwrap();
+    (res, rep, t0.elapsed().as_secs_f64())
+}
+
+/// The result validates, and its poses are `Chain` forward kinematics of its joints.
+fn assert_fk_consistent(name: &str, res: &FitResult) {
+    res.validate(name).unwrap();
+    let chain = Chain::from_result(res).unwrap();
+    for k in 0..res.frames {
+        let poses = chain
+            .part_poses(&res.root_pose(k).unwrap(), &res.joint_states(k))
+            .unwrap();
+        for (p, m) in poses.iter().enumerate() {
+            assert!(
+                m.abs_diff_eq(res.pose(k, p).unwrap(), 1e-9),
+                "{name} frame {k} part {p}"
+            );
+        }
+    }
+}
+
+fn check(
+    seq: &Seq,
+    res: &FitResult,
+    rep: &gsart::kinematics::KinReport,
+    failures: &mut Vec<String>,
+) -> Errors {
+    let merged_ok = rep.parts == seq.gt.num_parts
+        && rep
+            .merge_map
+            .iter()
+            .enumerate()
+            .all(|(i, &m)| m as usize == i);
+    if !merged_ok {
+        failures.push(format!(
+            "{}: merged distinct parts {:?}",
+            seq.name, rep.merge_log
+        ));
+    }
+    assert_fk_consistent(&seq.name, res);
+    let e = evaluate(seq, res);
+    if e.tree_mismatch != 0 || e.type_errors != 0 || e.max_axis_deg > 5.0 || e.max_pivot > 0.02 {
+        failures.push(format!(
+            "{}: tree {} types {} axis {} pivot {}",
+            seq.name, e.tree_mismatch, e.type_errors, e.max_axis_deg, e.max_pivot
+        ));
+    }
+    e
+}
+
+#[test]
+fn gt_input_recovers_tree_and_joints() {
+    let seqs = sequences();
+    if seqs.is_empty() {
+        eprintln!("skip: {BENCH} not present");
+        return;
+    }
+    let mut failures = Vec::new();
+    for dir in seqs {
+        let seq = load(&dir);
+        // Projection only: exact on exact input.
+        let opts = KinOptions {
+            refine: None,
+            ..Default::default()
+        };
+        let (res, rep, secs) = run(&seq, &opts);
+        let e = check(&seq, &res, &rep, &mut failures);
+        eprintln!(
+            "{:<18} projection: parts {:>2}/{:<2} root {:>2} tree-mismatch {} type-errors {} max-axis {:.4}° max-pivot {:.5} spacing {:.4} merges {} ({secs:.2}s)",
+            seq.name, rep.parts, seq.gt.num_parts, e.root, e.tree_mismatch, e.type_errors,
+            e.max_axis_deg, e.max_pivot, rep.spacing, rep.merge_log.len()
+        );
+        // Output poses are the chain's forward kinematics and match the observed motion.
+        for t in 0..res.frames {
+            for p in 0..res.parts {
+                let m = gsart::geom::se3::from_row_major(&res.poses[t][p]);
+                let obs: DMat4 =
+                    seq.gt.poses[t][p] * gsart::geom::se3::rigid_inverse(&seq.gt.poses[0][p]);
+                assert!(m.abs_diff_eq(obs, 1e-6), "{} frame {t} part {p}", seq.name);
+            }
+        }
+        // With refinement (Chamfer against the observed clouds).
+        let (res, rep, secs) = run(&seq, &KinOptions::default());
+        let e = check(&seq, &res, &rep, &mut failures);
+        let r = rep.refine.as_ref().unwrap();
+        eprintln!(
+            "{:<18} refined:    accepted {} loss {:.6} -> {:.6} max-axis {:.4}° max-pivot {:.5} ({secs:.2}s)",
+            seq.name, r.accepted, r.loss_before, r.loss_after, e.max_axis_deg, e.max_pivot
+        );
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// Measurement: smallest L_merge over ground-truth joints, paper form vs the one used.
+#[test]
+fn merge_margins() {
+    use gsart::kinematics::merge::{merge_loss, merge_loss_consecutive};
+    for dir in sequences() {
+        let text = std::fs::read_to_string(dir.join("gt.json")).unwrap();
+        let gt = GroundTruth::from_json(&text, "gt.json").unwrap();
+        let (mut a, mut c) = (f64::INFINITY, f64::INFINITY);
+        for p in 1..gt.num_parts {
+            let q = gt.parent[p] as usize;
+            a = a.min(merge_loss_consecutive(&gt.poses, q, p));
+            c = c.min(merge_loss(&gt.poses, q, p));
+        }
+        eprintln!(
+            "{:?}: min L_merge over GT joints: consecutive {a:.4} all-pairs {c:.4}",
+            dir.file_name().unwrap()
+        );
+        assert!(c > 3e-2, "{dir:?}: a ground-truth joint would be merged");
+    }
+}

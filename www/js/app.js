@@ -1,0 +1,1096 @@
+// GSArt page controller: Load → Fit → Explore/Export.
+// All computation is done by the wasm core (in workers for anything slow);
+// this file only moves data between the UI, the workers and the 3D view.
+import init, * as wasm from '../pkg/gsart.js';
+import { View } from './view.js';
+import { FitJob, WorkerJob, CancelledError, maxParallel } from './jobs.js';
+import { entriesFromDrop, entriesFromInput, classify, basename } from './files.js';
+import { LossChart } from './chart.js';
+import { drawTree } from './tree.js';
+import { download, zip } from './save.js';
+
+const $ = (id) => document.getElementById(id);
+const ICON_PLAY = '<svg viewBox="0 0 24 24" width="16" height="16" aria-hidden="true"><path d="M7 4.5v15l12-7.5z" fill="currentColor"/></svg>';
+const ICON_PAUSE = '<svg viewBox="0 0 24 24" width="16" height="16" aria-hidden="true"><rect x="6" y="4.5" width="4" height="15" rx="1" fill="currentColor"/><rect x="14" y="4.5" width="4" height="15" rx="1" fill="currentColor"/></svg>';
+const params = new URLSearchParams(location.search);
+
+const S = {
+  view: null,
+  frames: [], // {name, bytes?, points, labels, error, status}
+  seqName: '',
+  example: null,
+  gt: null, // gt.json text
+  heldout: null, // {frames: Float32Array[], names: string[]}
+  loadToken: 0,
+  current: 0,
+  job: null,
+  working: null, // {m, frames}
+  focusM: null,
+  model: null, // wasm Model
+  modelSource: '', // 'fit' | 'file' | 'url'
+  modelUrl: null,
+  states: null,
+  frameStates: null,
+  playing: false,
+  playTimer: null,
+  gaussiansOn: true,
+  hot: -1,
+  palette: null,
+  metrics: null,
+};
+
+// ------------------------------------------------------------------ helpers
+
+function toast(text, kind = '', ms = 4000) {
+  const t = $('toast');
+  t.textContent = text;
+  t.className = `toast ${kind}`;
+  t.hidden = false;
+  clearTimeout(toast.timer);
+  toast.timer = setTimeout(() => { t.hidden = true; }, ms);
+}
+
+function errText(e) {
+  return e instanceof Error ? e.message : String(e);
+}
+
+function fmtInt(n) { return n.toLocaleString('en-US'); }
+
+function fmtTime(s) {
+  if (!Number.isFinite(s) || s < 0) return '';
+  if (s < 1) return '<1 s';
+  if (s < 60) return `${Math.round(s)} s`;
+  const m = Math.floor(s / 60);
+  return `${m} min ${String(Math.round(s % 60)).padStart(2, '0')} s`;
+}
+
+function partColor(p) {
+  const pal = S.palette;
+  if (pal && pal.length >= 3) {
+    const n = pal.length / 3;
+    const i = (p % n) * 3;
+    return `rgb(${pal[i]}, ${pal[i + 1]}, ${pal[i + 2]})`;
+  }
+  return `hsl(${(p * 137.508) % 360} 70% 60%)`;
+}
+
+function goodFrames() { return S.frames.filter((f) => f.points && !f.error); }
+
+function safeName(s) { return (s || 'gsart').replace(/[^A-Za-z0-9._-]+/g, '_').replace(/^_+|_+$/g, '') || 'gsart'; }
+
+function setStepActive(step) {
+  for (const id of ['step-load', 'step-fit', 'step-explore']) $(id).classList.toggle('active', id === step);
+}
+
+// ------------------------------------------------------------------ 3D view
+
+async function startView() {
+  const badge = $('backend');
+  const forceWebgl = params.get('backend') === 'webgl2' || params.get('backend') === 'webgl';
+  try {
+    S.view = await View.create($('view'), wasm, { forceWebgl });
+  } catch (e) {
+    badge.textContent = 'no 3D';
+    badge.className = 'badge none';
+    const neither = !navigator.gpu && !hasWebgl2();
+    const msg = $('view-message');
+    msg.replaceChildren();
+    const box = document.createElement('div');
+    box.className = 'box';
+    box.innerHTML = neither
+      ? '<h2>No WebGPU or WebGL2 here</h2><p>This browser offers neither WebGPU nor WebGL2, so the point clouds cannot be drawn. '
+        + 'Loading, fitting and exporting still work. Use a current Chrome, Edge, Firefox or Safari, or turn on hardware acceleration.</p>'
+      : '<h2>The 3D view could not start</h2><p>Loading, fitting and exporting still work; only the drawing is missing.</p>';
+    const detail = document.createElement('p');
+    detail.className = 'muted small';
+    detail.textContent = errText(e);
+    box.appendChild(detail);
+    msg.appendChild(box);
+    msg.hidden = false;
+    $('empty-hint').hidden = true;
+    console.warn('3D view unavailable:', e);
+    return;
+  }
+  const b = S.view.backend;
+  badge.textContent = b === 'webgpu' ? 'WebGPU' : b === 'webgl2' ? 'WebGL2' : b;
+  badge.className = `badge ${b}`;
+  badge.title = b === 'webgpu' ? 'Drawing with WebGPU' : 'Drawing with WebGL2 (this browser has no usable WebGPU)';
+  document.body.dataset.backend = b;
+  try { S.palette = wasm.part_palette?.(64) ?? null; } catch { S.palette = null; }
+  S.view.onCamera = (state) => writeHash(state);
+  S.view.setGaussiansVisible(S.gaussiansOn);
+}
+
+function hasWebgl2() {
+  try { return !!document.createElement('canvas').getContext('webgl2'); } catch { return false; }
+}
+
+function writeHash(camState) {
+  const h = new URLSearchParams(location.hash.slice(1));
+  if (camState) h.set('cam', camState);
+  history.replaceState(null, '', `${location.pathname}${location.search}#${h.toString()}`);
+}
+
+function applyHashCamera() {
+  const cam = new URLSearchParams(location.hash.slice(1)).get('cam');
+  if (cam && S.view) S.view.setCameraState(cam);
+}
+
+// ------------------------------------------------------------------ loading
+
+function resetResult() {
+  stopPlay();
+  if (S.model) { try { S.model.free(); } catch { /* already freed */ } }
+  S.model = null;
+  S.metrics = null;
+  S.modelUrl = null;
+  $('explore').hidden = true;
+  $('explore-empty').hidden = false;
+  $('metrics-wrap').hidden = true;
+  if (S.view) { S.view.clearGaussians(); S.view.clearAxes(); }
+}
+
+function cancelFit(silent = false) {
+  if (!S.job) return;
+  S.job.cancel();
+  S.job = null;
+  fitUi(false);
+  if (!silent) {
+    $('fit-status').innerHTML = '<span class="msg-warn">Cancelled.</span> Your frames are still loaded; change the settings and fit again.';
+  }
+  showFrame(S.current);
+}
+
+/** Replaces the sequence with named PLY byte buffers; parses them in a worker. */
+async function loadSequence({ name, files, gt = null, heldout = [], example = null, note = '' }) {
+  cancelFit(true);
+  resetResult();
+  const token = ++S.loadToken;
+  S.seqName = name;
+  S.example = example;
+  S.gt = gt;
+  S.heldout = null;
+  S.current = 0;
+  // Natural filename order (f2 before f10), by the core's rule.
+  let order = files.map((_, i) => i);
+  try { order = Array.from(wasm.natural_order(files.map((f) => f.name))); } catch { /* keep given order */ }
+  const sorted = order.map((i) => files[i]);
+  S.frames = sorted.map((f) => ({ name: f.name, points: null, labels: null, error: null, status: 'reading…' }));
+  $('fit-status').textContent = '';
+  $('progress').hidden = true;
+  renderFrameList();
+  renderSummary(note);
+  const buffers = await Promise.all(sorted.map((f) => f.bytes ?? f.file.arrayBuffer()));
+  if (token !== S.loadToken) return;
+  const job = new WorkerJob(
+    { type: 'parse', files: sorted.map((f, i) => ({ name: f.name, bytes: buffers[i] })) },
+    buffers,
+    (msg) => {
+      if (token !== S.loadToken || msg.type !== 'parsed') return;
+      const fr = S.frames.find((f) => f.name === msg.name && f.status);
+      if (!fr) return;
+      fr.status = null;
+      if (msg.error) fr.error = msg.error;
+      else { fr.points = msg.points; fr.labels = msg.labels; }
+      renderFrameList();
+      const good = goodFrames();
+      if (good.length === 1 || (good.length && fr === good[0])) showFrame(0, { frameBox: true });
+    },
+  );
+  try {
+    await job.promise;
+  } catch (e) {
+    if (token === S.loadToken) toast(`Could not read the files: ${errText(e)}`, 'error', 8000);
+    return;
+  }
+  if (token !== S.loadToken) return;
+  if (heldout.length && gt) {
+    const hb = await Promise.all(heldout.map((f) => f.file.arrayBuffer()));
+    const parsed = [];
+    const hj = new WorkerJob({ type: 'parse', files: heldout.map((f, i) => ({ name: f.name, bytes: hb[i] })) }, hb,
+      (msg) => { if (msg.type === 'parsed' && !msg.error) parsed.push(msg); });
+    try { await hj.promise; } catch { /* metrics will say held-out poses are missing */ }
+    if (token !== S.loadToken) return;
+    let ho = parsed.map((p) => p.name);
+    try { ho = Array.from(wasm.natural_order(ho)).map((i) => parsed[i].name); } catch { /* keep */ }
+    const byName = new Map(parsed.map((p) => [p.name, p]));
+    S.heldout = { names: ho, frames: ho.map((n) => byName.get(n).points) };
+  }
+  afterLoad(note);
+}
+
+function afterLoad(note = '') {
+  renderFrameList();
+  renderSummary(note);
+  updateAutoRange();
+  const good = goodFrames();
+  $('btn-fit').disabled = good.length < 2;
+  setStepActive(good.length >= 2 ? 'step-fit' : 'step-load');
+  if (good.length) showFrame(Math.min(S.current, good.length - 1), { frameBox: true });
+  applyHashCamera();
+  if (params.get('fit') === '1' && !afterLoad.autoFitDone && good.length >= 2) {
+    afterLoad.autoFitDone = true;
+    startFit();
+  }
+}
+
+function renderSummary(note = '') {
+  const el = $('sequence-summary');
+  const all = S.frames.length;
+  if (!all) { el.textContent = ''; $('load-actions').hidden = true; return; }
+  $('load-actions').hidden = false;
+  const good = goodFrames();
+  const bad = S.frames.filter((f) => f.error).length;
+  const reading = S.frames.filter((f) => f.status).length;
+  const parts = [];
+  parts.push(`<strong>${escapeHtml(S.seqName || 'Sequence')}</strong>`);
+  parts.push(`${good.length} frame${good.length === 1 ? '' : 's'}`);
+  if (good.length) {
+    const n = good.map((f) => f.points.length / 3);
+    const lo = Math.min(...n), hi = Math.max(...n);
+    parts.push(lo === hi ? `${fmtInt(lo)} points each` : `${fmtInt(lo)}–${fmtInt(hi)} points`);
+  }
+  if (S.gt) parts.push('ground truth ✓');
+  let html = parts.join(' · ');
+  if (reading) html += ` <span class="muted">(reading ${reading}…)</span>`;
+  if (bad) html += `<br><span class="msg-error">${bad} file${bad === 1 ? '' : 's'} could not be read (see below); ${bad === 1 ? 'it is' : 'they are'} left out of the fit.</span>`;
+  if (!reading && good.length === 1) html += '<br><span class="msg-warn">A sequence needs at least 2 frames: add more PLY files.</span>';
+  if (note) html += `<br><span class="msg-warn">${escapeHtml(note)}</span>`;
+  const big = good.filter((f) => f.points.length / 3 > 4096).length;
+  if (big) html += `<br><span class="muted">${big} frame${big === 1 ? '' : 's'} larger than 4,096 points will be downsampled for the fit (labels are still given for every point).</span>`;
+  el.innerHTML = html;
+}
+
+function escapeHtml(s) {
+  return String(s).replace(/[&<>"']/g, (c) => ({ '&': '&amp;', '<': '&lt;', '>': '&gt;', '"': '&quot;', "'": '&#39;' })[c]);
+}
+
+function renderFrameList() {
+  const ol = $('frame-list');
+  ol.replaceChildren();
+  const good = goodFrames();
+  for (const f of S.frames) {
+    const li = document.createElement('li');
+    const name = document.createElement('span');
+    name.className = 'fname';
+    name.textContent = f.name;
+    name.title = f.name;
+    const count = document.createElement('span');
+    count.className = 'fcount';
+    li.append(name, count);
+    if (f.error) {
+      li.className = 'bad';
+      count.textContent = 'error';
+      const err = document.createElement('span');
+      err.className = 'ferror';
+      // The core's message starts with the file name; it is already on the row.
+      const prefix = `${f.name}: `;
+      err.textContent = f.error.startsWith(prefix) ? f.error.slice(prefix.length) : f.error;
+      err.title = f.error;
+      err.setAttribute('role', 'alert');
+      li.appendChild(err);
+      li.setAttribute('aria-label', `${f.name}: ${f.error}`);
+    } else if (f.status) {
+      count.textContent = f.status;
+    } else {
+      const n = f.points.length / 3;
+      count.textContent = `${fmtInt(n)} pts`;
+      const gi = good.indexOf(f);
+      li.dataset.index = String(gi);
+      if (gi === S.current) li.classList.add('current');
+      li.addEventListener('click', () => { stopPlay(); showFrame(gi); });
+      li.setAttribute('aria-label', `${f.name}, ${n} points`);
+    }
+    ol.appendChild(li);
+  }
+}
+
+function updateAutoRange() {
+  const good = goodFrames();
+  if (good.length < 2) return;
+  try {
+    const r = wasm.default_part_range(good.map((f) => f.points), good.map((f) => f.name));
+    S.autoRange = [r[0], r[1]];
+    if ($('parts-auto').checked) {
+      $('parts-min').value = r[0];
+      $('parts-max').value = r[1];
+    }
+  } catch (e) {
+    console.warn('default_part_range', e);
+  }
+}
+
+async function handleEntries(entries) {
+  const c = classify(entries);
+  if (c.kind === 'empty') { toast(c.message, 'error'); return; }
+  if (c.kind === 'result') {
+    const text = await c.entry.file.text();
+    openResult(text, basename(c.entry.path), 'file');
+    return;
+  }
+  const gt = c.gt ? await c.gt.file.text() : null;
+  const name = c.folder ? basename(c.folder) : (c.frames.length === 1 ? c.frames[0].file.name : 'Sequence');
+  await loadSequence({
+    name,
+    files: c.frames.map((e) => ({ name: basename(e.path), file: e.file })),
+    gt,
+    heldout: c.heldout.map((e) => ({ name: basename(e.path), file: e.file })),
+    note: c.note,
+  });
+}
+
+async function loadExample(name) {
+  cancelFit(true);
+  for (const b of document.querySelectorAll('.chip')) b.classList.toggle('current', b.dataset.example === name);
+  const token = ++S.loadToken;
+  $('sequence-summary').innerHTML = `<span class="muted">Generating “${escapeHtml(name)}”…</span>`;
+  let ex;
+  try {
+    const job = new WorkerJob({ type: 'example', name, seed: Number($('seed').value) || 0 });
+    ex = (await job.promise).example;
+  } catch (e) {
+    toast(`Could not generate the example: ${errText(e)}`, 'error', 8000);
+    $('sequence-summary').textContent = '';
+    return;
+  }
+  if (token !== S.loadToken) return;
+  resetResult();
+  S.seqName = `${name} (example)`;
+  S.example = name;
+  S.gt = ex.gt;
+  S.heldout = ex.heldout.length ? { frames: ex.heldout.map((f) => f.points), names: ex.heldout.map((f) => f.name) } : null;
+  S.frames = ex.frames.map((f) => ({ name: f.name, points: f.points, labels: f.labels ?? null, error: null, status: null }));
+  S.current = 0;
+  const url = new URL(location.href);
+  url.searchParams.set('example', name);
+  url.searchParams.delete('model');
+  history.replaceState(null, '', url);
+  $('fit-status').textContent = '';
+  $('progress').hidden = true;
+  afterLoad();
+}
+
+// ------------------------------------------------------------------ frames & timeline
+
+function frameCount() {
+  if (S.model) return S.model.frames();
+  return goodFrames().length;
+}
+
+function showFrame(k, { frameBox = false } = {}) {
+  const n = frameCount();
+  if (!n) { updateHud(); return; }
+  k = ((k % n) + n) % n;
+  S.current = k;
+  $('empty-hint').hidden = true;
+  if (S.model) {
+    S.frameStates = Float64Array.from(S.model.frame_states(k));
+    S.states = S.frameStates.slice();
+    syncSliders();
+    drawModel({ frameBox });
+  } else if (!S.job) {
+    const f = goodFrames()[k];
+    if (S.view) {
+      S.view.clearGaussians();
+      S.view.clearAxes();
+      S.view.setPoints(f.points, null, { frameBox });
+    }
+  }
+  $('timeline').hidden = n < 2;
+  const slider = $('frame-slider');
+  slider.max = String(n - 1);
+  slider.value = String(k);
+  $('frame-label').textContent = `${k + 1} / ${n}`;
+  for (const li of $('frame-list').children) li.classList.toggle('current', li.dataset.index === String(k));
+  updateHud();
+}
+
+function updateHud() {
+  const n = frameCount();
+  if (!n) { $('hud-title').textContent = ''; $('hud-sub').textContent = ''; return; }
+  const k = S.current;
+  let title = S.seqName || '';
+  let sub = '';
+  if (S.model) {
+    const fname = goodFrames()[k]?.name;
+    sub = `frame ${k + 1} of ${n}${fname ? ` · ${fname}` : ''} · ${S.model.parts()} parts`;
+    if (S.states && S.frameStates && S.states.some((v, i) => Math.abs(v - S.frameStates[i]) > 1e-9)) sub += ' · re-posed';
+  } else if (S.job) {
+    sub = 'fitting…';
+  } else {
+    const f = goodFrames()[k];
+    sub = `frame ${k + 1} of ${n} · ${f.name} · ${fmtInt(f.points.length / 3)} points`;
+  }
+  $('hud-title').textContent = title;
+  $('hud-sub').textContent = sub;
+}
+
+function play() {
+  if (frameCount() < 2) return;
+  S.playing = true;
+  $('btn-play').innerHTML = ICON_PAUSE;
+  $('btn-play').setAttribute('aria-label', 'Pause');
+  clearInterval(S.playTimer);
+  S.playTimer = setInterval(() => showFrame(S.current + 1), 400);
+}
+
+function stopPlay() {
+  S.playing = false;
+  clearInterval(S.playTimer);
+  $('btn-play').innerHTML = ICON_PLAY;
+  $('btn-play').setAttribute('aria-label', 'Play');
+}
+
+function togglePlay() { if (S.playing) stopPlay(); else play(); }
+
+// ------------------------------------------------------------------ fitting
+
+function readOptions() {
+  const quality = document.querySelector('input[name=quality]:checked')?.value || 'balanced';
+  const auto = $('parts-auto').checked;
+  let lo = Math.round(Number($('parts-min').value)), hi = Math.round(Number($('parts-max').value));
+  const opts = {
+    quality,
+    occlusion: $('occlusion').value,
+    seed: Math.max(0, Math.round(Number($('seed').value) || 0)),
+    parts: null,
+  };
+  if (!auto) {
+    if (!(lo >= 2) || !(hi >= lo) || hi > 40) throw new Error('Part counts: give a range like 3 to 7 (each at least 2, at most 40).');
+    opts.parts = [lo, hi];
+  } else {
+    [lo, hi] = S.autoRange || [lo, hi];
+  }
+  return { opts, range: [lo, hi] };
+}
+
+const STAGES = [
+  { key: 'gaussians', name: 'Step 1 · dynamic Gaussians' },
+  { key: 'select', name: 'Choosing the part count' },
+  { key: 'tree', name: 'Step 2 · kinematic tree' },
+  { key: 'joints', name: 'Step 3 · joints' },
+  { key: 'metrics', name: 'Metrics against ground truth' },
+];
+
+function buildStages(withMetrics) {
+  const box = $('stage-list');
+  box.replaceChildren();
+  S.stageEls = {};
+  for (const st of STAGES) {
+    if (st.key === 'metrics' && !withMetrics) continue;
+    const row = document.createElement('div');
+    row.className = 'stage-row pending';
+    row.innerHTML = `<span class="sname"></span><span class="seta"></span><div class="bar" role="progressbar" aria-valuemin="0" aria-valuemax="100" aria-valuenow="0"><div></div></div>`;
+    row.querySelector('.sname').textContent = st.name;
+    row.querySelector('.bar').setAttribute('aria-label', st.name);
+    box.appendChild(row);
+    S.stageEls[st.key] = { row, t0: null };
+  }
+}
+
+function setStage(key, frac, text = '') {
+  const s = S.stageEls?.[key];
+  if (!s) return;
+  frac = Math.max(0, Math.min(1, frac));
+  if (s.t0 === null) s.t0 = performance.now();
+  const row = s.row;
+  row.classList.remove('pending');
+  row.classList.toggle('done', frac >= 1);
+  row.querySelector('.bar > div').style.width = `${(frac * 100).toFixed(1)}%`;
+  row.querySelector('.bar').setAttribute('aria-valuenow', String(Math.round(frac * 100)));
+  let eta = text;
+  if (!eta) {
+    if (frac >= 1) eta = `done in ${fmtTime((performance.now() - s.t0) / 1000)}`;
+    else if (frac > 0.02) {
+      const el = (performance.now() - s.t0) / 1000;
+      eta = `${Math.round(frac * 100)}% · ${fmtTime(el / frac - el)} left`;
+    } else eta = 'starting…';
+  }
+  row.querySelector('.seta').textContent = eta;
+  // Earlier stages are complete once a later one reports.
+  let before = true;
+  for (const st of STAGES) {
+    if (st.key === key) before = false;
+    else if (before && S.stageEls[st.key] && !S.stageEls[st.key].row.classList.contains('done')) {
+      const r = S.stageEls[st.key].row;
+      r.classList.remove('pending');
+      r.classList.add('done');
+      r.querySelector('.bar > div').style.width = '100%';
+      if (!r.querySelector('.seta').textContent || !r.querySelector('.seta').textContent.startsWith('done')) {
+        const t0 = S.stageEls[st.key].t0;
+        r.querySelector('.seta').textContent = t0 === null ? 'done' : `done in ${fmtTime((performance.now() - t0) / 1000)}`;
+      }
+    }
+  }
+}
+
+function fitUi(running) {
+  $('btn-fit').hidden = running;
+  $('btn-cancel').hidden = !running;
+  for (const el of $('settings').querySelectorAll('input, select')) el.disabled = running || ((el.id === 'parts-min' || el.id === 'parts-max') && $('parts-auto').checked);
+  for (const el of document.querySelectorAll('#step-load button, #step-load input, .chip')) el.disabled = running;
+}
+
+function lossValue(losses) {
+  if (!losses) return NaN;
+  const entries = Array.isArray(losses) ? losses : Object.entries(losses);
+  if (!entries.length) return NaN;
+  const pref = ['total', 'chamfer', 'cd', 'loss'];
+  for (const p of pref) {
+    const e = entries.find(([k]) => k.toLowerCase() === p);
+    if (e) return e[1];
+  }
+  return entries.reduce((s, [, v]) => s + (Number.isFinite(v) ? v : 0), 0);
+}
+
+async function startFit() {
+  const good = goodFrames();
+  if (good.length < 2) { toast('Load at least 2 frames first.', 'error'); return; }
+  let opts, range;
+  try { ({ opts, range } = readOptions()); } catch (e) { toast(errText(e), 'error'); return; }
+  stopPlay();
+  resetResult();
+  const gtOk = S.gt && good.length === S.frames.length;
+  buildStages(!!gtOk);
+  $('progress').hidden = false;
+  S.chart.clear('Step 1 loss');
+  fitUi(true);
+  setStepActive('step-fit');
+  const par = Math.min(maxParallel(), range[1] - range[0] + 1);
+  $('fit-status').innerHTML = `Trying ${range[0] === range[1] ? `m = ${range[0]}` : `m = ${range[0]}…${range[1]}`} Gaussians`
+    + ` (${par} in parallel), ${opts.quality} quality.`;
+  const cands = new Map(); // m -> {iter, total, done}
+  let totalGuess = 0;
+  const nCand = range[1] - range[0] + 1;
+  const step1Progress = () => {
+    let done = 0, tot = 0;
+    for (const c of cands.values()) { done += c.done ? c.total : c.iter; tot += c.total; }
+    const missing = nCand - cands.size;
+    tot += missing * totalGuess;
+    const finished = [...cands.values()].filter((c) => c.done).length;
+    const running = cands.size - finished;
+    const frac = tot ? done / tot : 0;
+    setStage('gaussians', frac);
+    const eta = S.stageEls.gaussians.row.querySelector('.seta');
+    eta.textContent = `${finished}/${nCand} done${running ? ` · ${running} running` : ''} · ${eta.textContent}`;
+  };
+  S.working = null;
+  S.focusM = null;
+  S.gaussiansSnapshot = null;
+  const job = new FitJob({
+    frames: good.map((f) => f.points),
+    names: good.map((f) => f.name),
+    options: opts,
+    range,
+    gt: gtOk ? S.gt : null,
+    heldout: gtOk ? S.heldout : null,
+    callbacks: {
+      onCandidateStart: (m) => {
+        cands.set(m, { iter: 0, total: totalGuess, done: false });
+        if (S.focusM === null) S.focusM = m;
+        step1Progress();
+      },
+      onWorking: (m, frames) => { if (m === S.focusM || !S.working) S.working = { m, frames }; },
+      onCandidateProgress: (m, p) => {
+        const c = cands.get(m);
+        if (!c) return;
+        if (p.stage === 'gaussians' || p.stage === 'init') {
+          c.iter = p.iter; c.total = p.total || c.total;
+          if (!totalGuess && p.total) totalGuess = p.total;
+        }
+        const y = lossValue(p.losses);
+        if (p.total) S.chart.add(`m${m}`, `m=${m}`, p.iter / p.total, y);
+        step1Progress();
+        if (p.snapshot && m === S.focusM) showSnapshot(m, p.snapshot);
+      },
+      onCandidateDone: (m) => {
+        const c = cands.get(m);
+        if (c) c.done = true;
+        if (S.focusM === m) {
+          // Follow a candidate that is still running.
+          const next = [...cands.entries()].find(([, v]) => !v.done);
+          S.focusM = next ? next[0] : S.focusM;
+        }
+        step1Progress();
+      },
+      onFinishProgress: (p) => {
+        const key = p.stage === 'done' ? 'joints' : p.stage;
+        if (!S.stageEls[key]) return;
+        setStage(key, p.total ? p.iter / p.total : 0);
+        if (key === 'joints' && p.total) {
+          if (S.chart.title !== 'Step 3 loss') S.chart.clear('Step 3 loss');
+          S.chart.add('joints', 'joints', p.iter / p.total, lossValue(p.losses));
+        }
+      },
+    },
+  });
+  S.job = job;
+  updateHud();
+  const t0 = performance.now();
+  let out;
+  try {
+    out = await job.run();
+  } catch (e) {
+    if (S.job !== job) return; // replaced or cancelled by a new load
+    S.job = null;
+    fitUi(false);
+    if (e instanceof CancelledError) return;
+    $('fit-status').innerHTML = `<span class="msg-error">The fit failed: ${escapeHtml(errText(e))}</span>`;
+    showFrame(S.current);
+    return;
+  }
+  if (S.job !== job) return;
+  S.job = null;
+  fitUi(false);
+  for (const st of STAGES) if (S.stageEls[st.key]) setStage(st.key, 1);
+  const secs = (performance.now() - t0) / 1000;
+  const best = out.candidates.length ? out.candidates.reduce((a, b) => (b.loss < a.loss ? b : a)) : null;
+  $('fit-status').innerHTML = `<span class="msg-good">Done in ${fmtTime(secs)}.</span>`
+    + (out.candidates.length > 1 ? ` Tried m = ${out.candidates.map((c) => c.m).join(', ')}.` : '');
+  S.metrics = out.metrics;
+  S.metricsError = out.metricsError;
+  openResult(out.result, S.seqName, 'fit', { seconds: secs, best });
+}
+
+function showSnapshot(m, snap) {
+  if (!S.view || !S.working || S.working.m !== m) return;
+  const pts = S.working.frames[snap.frame];
+  if (!pts || pts.length / 3 !== snap.labels.length) return;
+  S.view.setPoints(pts, snap.labels);
+  const nG = snap.centers.length / 3;
+  S.view.setGaussians(snap.centers, snap.rotations, snap.scales, Uint32Array.from({ length: nG }, (_, i) => i));
+  $('hud-sub').textContent = `fitting m = ${m} · frame ${snap.frame + 1}`;
+}
+
+// ------------------------------------------------------------------ results
+
+function openResult(text, source, how, extra = {}) {
+  let model;
+  try {
+    model = wasm.Model.from_json(text, source || 'result');
+  } catch (e) {
+    toast(errText(e), 'error', 9000);
+    return false;
+  }
+  resetResult();
+  S.model = model;
+  S.modelSource = how;
+  // Points: the loaded frames when they match the result, else the points the file carries.
+  const good = goodFrames();
+  let attached = false;
+  if (how === 'fit' || (good.length === model.frames() && good.every((f, k) => model.label_count(k) === f.points.length / 3))) {
+    try {
+      good.forEach((f, k) => model.set_frame_points(k, f.points));
+      attached = true;
+    } catch (e) { console.warn('frames do not match the result', e); }
+  }
+  if (!attached) {
+    if (!model.has_points()) {
+      toast('This result carries no points and does not match the loaded frames: load its frames to see it.', 'error', 9000);
+    }
+    if (how !== 'fit') {
+      // A shared result stands alone: its frames are not the ones in the list.
+      S.seqName = source;
+    }
+  }
+  if (!model.has_tree()) {
+    toast('This result has no kinematic tree (the fit stopped after Step 1): segmentation only.', '', 6000);
+  }
+  renderResult(extra);
+  showFrame(Math.min(S.current, model.frames() - 1), { frameBox: how !== 'fit' });
+  if (how !== 'fit') applyHashCamera();
+  setStepActive('step-explore');
+  return true;
+}
+
+function renderResult(extra = {}) {
+  const m = S.model;
+  $('explore').hidden = false;
+  $('explore-empty').hidden = true;
+  const joints = m.joints();
+  const nR = joints.filter((j) => j.type === 'revolute').length;
+  const nP = joints.length - nR;
+  const bits = [`<strong>${m.parts()} parts</strong>`, `${joints.length} joint${joints.length === 1 ? '' : 's'}`];
+  if (joints.length) bits.push([nR ? `${nR} revolute` : '', nP ? `${nP} prismatic` : ''].filter(Boolean).join(', '));
+  bits.push(`${m.frames()} frames`);
+  let html = bits.join(' · ');
+  const info = m.info();
+  const notes = [];
+  if (extra.best) notes.push(`chosen m = ${extra.best.m} Gaussians`);
+  if (info && typeof info === 'object') {
+    if (info.occlusion_used) notes.push(`occlusion handling ${info.occlusion_used}`);
+    if (info.downsampled) notes.push(String(info.downsampled));
+  }
+  if (notes.length) html += `<br><span class="muted">${escapeHtml(notes.join(' · '))}</span>`;
+  $('result-summary').innerHTML = html;
+
+  // Tree
+  const parent = Array.from(m.parents());
+  if (parent.length) {
+    drawTree($('tree'), {
+      parent, root: m.root(), colors: parent.map((_, p) => partColor(p)),
+      jointOf: (p) => joints.find((j) => j.child === p) || null,
+      onHover: (p) => highlightPart(p),
+      onClick: (p) => document.querySelector(`.joint[data-child="${p}"] input`)?.focus(),
+    });
+  } else {
+    $('tree').innerHTML = '<p class="muted small" style="margin:4px">No tree in this result.</p>';
+  }
+
+  // Joints
+  const list = $('joint-list');
+  list.replaceChildren();
+  if (!joints.length) list.innerHTML = '<p class="muted small">No joints.</p>';
+  joints.forEach((j, idx) => {
+    const row = document.createElement('div');
+    row.className = 'joint';
+    row.dataset.child = String(j.child);
+    const sw = document.createElement('span');
+    sw.className = 'swatch';
+    sw.style.background = partColor(j.child);
+    const title = document.createElement('span');
+    title.className = 'jtitle';
+    title.textContent = `Joint ${idx + 1}: part ${j.parent} → ${j.child}`;
+    const val = document.createElement('span');
+    val.className = 'jvalue';
+    const detail = document.createElement('span');
+    detail.className = 'jdetail';
+    const ax = j.axis.map((v) => v.toFixed(2)).join(', ');
+    const [lo, hi] = j.limits;
+    const unit = j.type === 'revolute' ? '°' : '';
+    const fmtState = (v) => (j.type === 'revolute' ? `${(v * 180 / Math.PI).toFixed(1)}°` : v.toFixed(3));
+    detail.textContent = `${j.type} · axis (${ax}) · range ${fmtState(lo)} … ${fmtState(hi)}`;
+    const slider = document.createElement('input');
+    slider.type = 'range';
+    // A little room beyond the observed range, so the model can be explored.
+    const span = Math.max(hi - lo, j.type === 'revolute' ? 0.2 : 0.02);
+    slider.min = String(lo - 0.25 * span);
+    slider.max = String(hi + 0.25 * span);
+    slider.step = String(span / 400);
+    slider.setAttribute('aria-label', `Joint ${idx + 1} (${j.type}, part ${j.child})`);
+    slider.dataset.child = String(j.child);
+    slider.addEventListener('input', () => {
+      S.states[j.child] = Number(slider.value);
+      val.textContent = fmtState(S.states[j.child]);
+      drawModel();
+    });
+    slider.addEventListener('focus', () => highlightPart(j.child));
+    slider.addEventListener('blur', () => highlightPart(null));
+    row.addEventListener('mouseenter', () => highlightPart(j.child));
+    row.addEventListener('mouseleave', () => highlightPart(null));
+    row.append(sw, title, val, detail, slider);
+    row._fmt = fmtState;
+    row._unit = unit;
+    list.appendChild(row);
+  });
+
+  // Metrics
+  renderMetrics();
+}
+
+function syncSliders() {
+  for (const row of document.querySelectorAll('.joint')) {
+    const c = Number(row.dataset.child);
+    const s = row.querySelector('input');
+    if (!S.states) continue;
+    s.value = String(S.states[c]);
+    row.querySelector('.jvalue').textContent = row._fmt(S.states[c]);
+  }
+}
+
+function drawModel({ frameBox = false } = {}) {
+  const m = S.model;
+  if (!m || !S.view) { updateHud(); return; }
+  const k = S.current;
+  try {
+    const pts = m.pose_points(k, S.states);
+    const labels = m.labels(k);
+    S.view.setPoints(pts, labels, { frameBox });
+    const g = m.pose_gaussians(k, S.states);
+    if (g) S.view.setGaussians(g.centers, g.rotations, g.scales, g.parts);
+    else S.view.clearGaussians();
+    const ax = m.joint_axes(k, S.states);
+    const hl = S.hot >= 0 ? Array.from(ax.children).indexOf(S.hot) : -1;
+    S.view.setAxes(ax.origins, ax.dirs, ax.kinds, hl);
+  } catch (e) {
+    console.error(e);
+    toast(`Cannot draw this result: ${errText(e)}`, 'error', 8000);
+  }
+  updateHud();
+}
+
+function highlightPart(p) {
+  S.hot = p ?? -1;
+  for (const el of document.querySelectorAll('.tree .node')) el.classList.toggle('hot', Number(el.dataset.part) === S.hot);
+  for (const el of document.querySelectorAll('.joint')) el.classList.toggle('hot', Number(el.dataset.child) === S.hot);
+  if (S.model) drawModel();
+}
+
+const METRIC_LABELS = [
+  ['reconstruction_error', 'Reconstruction error', '×100, lower is better'],
+  ['flow_error', 'Flow error (EPE)', '×100, lower is better'],
+  ['mean_rand_index', 'Rand index (mean over frames)', 'higher is better'],
+  ['rand_index_canonical', 'Rand index (canonical frame)', 'higher is better'],
+  ['tree_edit_distance', 'Tree edit distance', 'lower is better'],
+  ['reanimation_error', 'Re-animation error', '×100, lower is better'],
+];
+
+function renderMetrics() {
+  const wrap = $('metrics-wrap');
+  const t = $('metrics');
+  t.replaceChildren();
+  if (S.metricsError) {
+    wrap.hidden = false;
+    t.innerHTML = `<tr><td class="msg-error">${escapeHtml(S.metricsError)}</td></tr>`;
+    return;
+  }
+  const mt = S.metrics;
+  if (!mt) { wrap.hidden = true; return; }
+  wrap.hidden = false;
+  const seen = new Set();
+  const row = (label, hint, v) => {
+    const tr = document.createElement('tr');
+    const a = document.createElement('td');
+    a.textContent = label;
+    if (hint) { const h = document.createElement('div'); h.className = 'hint'; h.textContent = hint; a.appendChild(h); }
+    const b = document.createElement('td');
+    b.textContent = typeof v === 'number' ? (Number.isInteger(v) ? String(v) : v.toFixed(Math.abs(v) < 10 ? 3 : 2)) : String(v);
+    tr.append(a, b);
+    t.appendChild(tr);
+  };
+  for (const [k, label, hint] of METRIC_LABELS) {
+    if (mt[k] !== undefined && mt[k] !== null) { row(label, hint, mt[k]); seen.add(k); }
+  }
+  for (const [k, v] of Object.entries(mt)) {
+    if (seen.has(k) || v === null || typeof v === 'object') continue;
+    row(k.replace(/_/g, ' '), '', v);
+  }
+}
+
+// ------------------------------------------------------------------ export & share
+
+function exportName() { return safeName(S.seqName.replace(/ \(example\)$/, '')); }
+
+function exportJson() {
+  if (!S.model) return;
+  download(new Blob([S.model.to_json(true)], { type: 'application/json' }), `${exportName()}.gsart.json`);
+}
+
+function exportPly() {
+  if (!S.model) return;
+  const n = S.model.frames();
+  const files = [];
+  const names = goodFrames().map((f) => f.name);
+  try {
+    for (let k = 0; k < n; k++) {
+      const base = (names[k] || `frame_${String(k).padStart(3, '0')}.ply`).replace(/\.ply$/i, '');
+      files.push({ name: `${base}_parts.ply`, bytes: S.model.segmented_ply(k) });
+    }
+  } catch (e) { toast(errText(e), 'error', 8000); return; }
+  if (files.length === 1) download(new Blob([files[0].bytes]), files[0].name);
+  else download(zip(files), `${exportName()}_segmented_ply.zip`);
+}
+
+function exportUrdf() {
+  if (!S.model) return;
+  try {
+    download(new Blob([S.model.urdf(exportName())], { type: 'application/xml' }), `${exportName()}.urdf`);
+  } catch (e) { toast(errText(e), 'error', 8000); }
+}
+
+async function exportPng() {
+  if (!S.view) { toast('No 3D view to capture.', 'error'); return; }
+  const blob = await S.view.screenshot();
+  if (blob) download(blob, `${exportName()}_frame${S.current + 1}.png`);
+  else toast('The screenshot could not be encoded.', 'error');
+}
+
+async function copyLink() {
+  const url = new URL(location.href);
+  if (S.view) {
+    const h = new URLSearchParams();
+    h.set('cam', S.view.cameraState());
+    url.hash = h.toString();
+  }
+  let note = '';
+  if (S.modelSource === 'url' && S.modelUrl) { url.searchParams.set('model', S.modelUrl); url.searchParams.delete('example'); }
+  else if (S.example) { url.searchParams.set('example', S.example); url.searchParams.delete('model'); }
+  else note = ' To share a fitted model, export the result JSON, host it, and open ?model=URL.';
+  try {
+    await navigator.clipboard.writeText(url.toString());
+    toast(`Link copied.${note}`, '', note ? 7000 : 3000);
+  } catch {
+    toast(url.toString(), '', 10000);
+  }
+}
+
+// ------------------------------------------------------------------ events
+
+function wire() {
+  $('file-input').addEventListener('change', async (e) => {
+    const entries = entriesFromInput(e.target);
+    e.target.value = '';
+    if (entries.length) await handleEntries(entries);
+  });
+  $('folder-input').addEventListener('change', async (e) => {
+    const entries = entriesFromInput(e.target);
+    e.target.value = '';
+    if (entries.length) await handleEntries(entries);
+  });
+  let depth = 0;
+  const overlay = $('drop-overlay');
+  window.addEventListener('dragenter', (e) => {
+    if (![...(e.dataTransfer?.types || [])].includes('Files')) return;
+    e.preventDefault();
+    depth++;
+    overlay.hidden = false;
+  });
+  window.addEventListener('dragover', (e) => { e.preventDefault(); if (e.dataTransfer) e.dataTransfer.dropEffect = 'copy'; });
+  window.addEventListener('dragleave', () => { depth = Math.max(0, depth - 1); if (!depth) overlay.hidden = true; });
+  window.addEventListener('drop', async (e) => {
+    e.preventDefault();
+    depth = 0;
+    overlay.hidden = true;
+    if (S.job) { toast('A fit is running: cancel it before loading new files.', 'error'); return; }
+    const entries = await entriesFromDrop(e.dataTransfer);
+    if (entries.length) await handleEntries(entries);
+  });
+
+  $('btn-clear').addEventListener('click', () => {
+    cancelFit(true);
+    resetResult();
+    S.loadToken++;
+    S.frames = [];
+    S.gt = null;
+    S.heldout = null;
+    S.example = null;
+    S.seqName = '';
+    renderFrameList();
+    renderSummary();
+    $('btn-fit').disabled = true;
+    $('timeline').hidden = true;
+    $('empty-hint').hidden = false;
+    $('fit-status').textContent = '';
+    $('progress').hidden = true;
+    if (S.view) S.view.setPoints(new Float32Array(0), null);
+    for (const b of document.querySelectorAll('.chip')) b.classList.remove('current');
+    updateHud();
+    setStepActive('step-load');
+  });
+
+  $('parts-auto').addEventListener('change', () => {
+    const auto = $('parts-auto').checked;
+    $('parts-min').disabled = auto;
+    $('parts-max').disabled = auto;
+    if (auto && S.autoRange) { $('parts-min').value = S.autoRange[0]; $('parts-max').value = S.autoRange[1]; }
+  });
+  $('btn-fit').addEventListener('click', startFit);
+  $('btn-cancel').addEventListener('click', () => cancelFit());
+
+  $('btn-play').addEventListener('click', togglePlay);
+  $('frame-slider').addEventListener('input', (e) => { stopPlay(); showFrame(Number(e.target.value)); });
+  $('btn-reset-view').addEventListener('click', () => S.view?.resetView());
+  $('btn-frame').addEventListener('click', () => S.view?.frameObject());
+  $('btn-gaussians').addEventListener('click', toggleGaussians);
+  $('btn-screenshot').addEventListener('click', exportPng);
+  $('btn-reset-joints').addEventListener('click', () => { if (S.model) showFrame(S.current); });
+  $('btn-export-json').addEventListener('click', exportJson);
+  $('btn-export-ply').addEventListener('click', exportPly);
+  $('btn-export-urdf').addEventListener('click', exportUrdf);
+  $('btn-export-png').addEventListener('click', exportPng);
+  $('btn-share').addEventListener('click', copyLink);
+
+  $('help-button').addEventListener('click', () => toggleHelp(true));
+  $('help-close').addEventListener('click', () => toggleHelp(false));
+  $('help').addEventListener('click', (e) => { if (e.target === $('help')) toggleHelp(false); });
+
+  window.addEventListener('keydown', (e) => {
+    if (e.ctrlKey || e.metaKey || e.altKey) return;
+    const t = e.target;
+    const typing = t instanceof HTMLElement && (t.tagName === 'INPUT' || t.tagName === 'SELECT' || t.tagName === 'TEXTAREA' || t.isContentEditable);
+    if (e.key === 'Escape') { toggleHelp(false); return; }
+    if (typing && !(t.type === 'range' && (e.key === ' ' || /^[rRfFgG?]$/.test(e.key)))) return;
+    if (t instanceof HTMLElement && t.tagName === 'BUTTON' && (e.key === ' ' || e.key === 'Enter')) return;
+    switch (e.key) {
+      case ' ': e.preventDefault(); togglePlay(); break;
+      case 'ArrowRight': e.preventDefault(); stopPlay(); showFrame(S.current + 1); break;
+      case 'ArrowLeft': e.preventDefault(); stopPlay(); showFrame(S.current - 1); break;
+      case 'r': case 'R': S.view?.resetView(); break;
+      case 'f': case 'F': S.view?.frameObject(); break;
+      case 'g': case 'G': toggleGaussians(); break;
+      case '?': toggleHelp($('help').hidden); break;
+      default: break;
+    }
+  });
+}
+
+function toggleGaussians() {
+  S.gaussiansOn = !S.gaussiansOn;
+  $('btn-gaussians').setAttribute('aria-pressed', String(S.gaussiansOn));
+  S.view?.setGaussiansVisible(S.gaussiansOn);
+}
+
+function toggleHelp(show) {
+  $('help').hidden = !show;
+  if (show) $('help-close').focus();
+}
+
+function renderExamples() {
+  const box = $('example-list');
+  let names = [];
+  try { names = Array.from(wasm.example_names()); } catch (e) { console.warn('example_names', e); }
+  for (const n of names) {
+    const b = document.createElement('button');
+    b.className = 'chip';
+    b.textContent = n;
+    b.dataset.example = n;
+    b.setAttribute('aria-label', `Example ${n}`);
+    b.addEventListener('click', () => loadExample(n));
+    box.appendChild(b);
+  }
+}
+
+async function openModelUrl(url) {
+  $('sequence-summary').innerHTML = `<span class="muted">Opening ${escapeHtml(url)}…</span>`;
+  try {
+    const res = await fetch(url);
+    if (!res.ok) throw new Error(`HTTP ${res.status} ${res.statusText}`);
+    const text = await res.text();
+    $('sequence-summary').textContent = '';
+    if (openResult(text, basename(new URL(url, location.href).pathname) || 'model', 'url')) S.modelUrl = url;
+  } catch (e) {
+    $('sequence-summary').textContent = '';
+    toast(`Could not open ${url}: ${errText(e)}`, 'error', 10000);
+  }
+}
+
+// ------------------------------------------------------------------ start
+
+async function main() {
+  S.chart = new LossChart($('loss-chart'));
+  try {
+    await init();
+  } catch (e) {
+    $('backend').textContent = 'failed';
+    $('backend').className = 'badge none';
+    $('view-message').innerHTML = `<div class="box"><h2>GSArt could not start</h2><p>The WebAssembly module failed to load: ${escapeHtml(errText(e))}</p></div>`;
+    $('view-message').hidden = false;
+    return;
+  }
+  $('version').textContent = wasm.version();
+  wire();
+  renderExamples();
+  await startView();
+  document.body.dataset.ready = '1';
+  const model = params.get('model');
+  const example = params.get('example');
+  if (model) await openModelUrl(model);
+  else if (example) await loadExample(example);
+  else setStepActive('step-load');
+  document.body.dataset.loaded = '1';
+}
+
+main();
+
+// Exposed for tests and the console.
+window.gsart = { state: S, showFrame, loadExample, startFit, cancelFit, openResult };

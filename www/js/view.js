@@ -1,0 +1,168 @@
+// The 3D view: wraps the wasm `Viewer` (wgpu: WebGPU when the browser has it,
+// WebGL2 otherwise), forwards pointer/wheel input, renders on demand (one
+// requestAnimationFrame per change), and keeps the camera in the URL hash.
+
+const NEUTRAL = [0x9f, 0xb4, 0xd8];
+
+export class View {
+  /** @returns {Promise<View>} */
+  static async create(canvas, wasm, { forceWebgl = false } = {}) {
+    if (typeof wasm.Viewer !== 'function') throw new Error('this build has no 3D viewer');
+    const v = new View(canvas, wasm);
+    v.viewer = await wasm.Viewer.create(canvas, forceWebgl);
+    v.backend = v.viewer.backend();
+    v.attach();
+    v.resize();
+    return v;
+  }
+
+  constructor(canvas, wasm) {
+    this.canvas = canvas;
+    this.wasm = wasm;
+    this.dirty = false;
+    this.onCamera = null; // called (debounced) after the user moves the camera
+    this.hasContent = false;
+  }
+
+  attach() {
+    const c = this.canvas;
+    const pos = (e) => {
+      const r = c.getBoundingClientRect();
+      return [e.clientX - r.left, e.clientY - r.top];
+    };
+    c.addEventListener('pointerdown', (e) => {
+      c.setPointerCapture(e.pointerId);
+      const [x, y] = pos(e);
+      this.viewer.pointer_down(e.pointerId, x, y, e.button, e.shiftKey || e.ctrlKey || e.metaKey);
+      c.focus({ preventScroll: true });
+    });
+    c.addEventListener('pointermove', (e) => {
+      const [x, y] = pos(e);
+      if (this.viewer.pointer_move(e.pointerId, x, y)) { this.request(); this.cameraMoved(); }
+    });
+    const up = (e) => { this.viewer.pointer_up(e.pointerId); };
+    c.addEventListener('pointerup', up);
+    c.addEventListener('pointercancel', up);
+    c.addEventListener('contextmenu', (e) => e.preventDefault());
+    c.addEventListener('wheel', (e) => {
+      e.preventDefault();
+      // Normalise line/page deltas to pixels.
+      const k = e.deltaMode === 1 ? 16 : e.deltaMode === 2 ? 400 : 1;
+      this.viewer.wheel(e.deltaY * k);
+      this.request();
+      this.cameraMoved();
+    }, { passive: false });
+    new ResizeObserver(() => this.resize()).observe(c);
+    window.matchMedia?.(`(resolution: ${window.devicePixelRatio}dppx)`).addEventListener?.('change', () => this.resize());
+  }
+
+  resize() {
+    const dpr = window.devicePixelRatio || 1;
+    const w = Math.max(1, this.canvas.clientWidth), h = Math.max(1, this.canvas.clientHeight);
+    this.viewer.resize(w, h, dpr);
+    this.request();
+  }
+
+  cameraMoved() {
+    clearTimeout(this.camTimer);
+    this.camTimer = setTimeout(() => this.onCamera?.(this.viewer.camera_state()), 300);
+  }
+
+  request() {
+    if (this.dirty) return;
+    this.dirty = true;
+    requestAnimationFrame(() => {
+      this.dirty = false;
+      this.renderNow();
+    });
+  }
+
+  renderNow() {
+    try {
+      this.viewer.render();
+    } catch (e) {
+      console.error('render failed', e);
+    }
+  }
+
+  /** Points coloured by part (labels) or, without labels, a neutral height tint. */
+  setPoints(points, labels, { frameBox = false } = {}) {
+    const n = points.length / 3;
+    if (labels) {
+      this.viewer.set_points(points, labels);
+    } else {
+      this.viewer.set_points(points, new Uint32Array(n));
+      this.viewer.set_point_colors(neutralColors(points));
+    }
+    if (frameBox || !this.hasContent) this.viewer.frame_object();
+    this.hasContent = n > 0;
+    this.request();
+  }
+
+  setPointSize(px) { this.viewer.set_point_size(px); this.request(); }
+
+  setGaussians(centers, rotations, scales, parts) {
+    this.viewer.set_gaussians(centers, rotations, scales, parts);
+    this.request();
+  }
+
+  clearGaussians() {
+    this.viewer.set_gaussians(new Float32Array(0), new Float32Array(0), new Float32Array(0), new Uint32Array(0));
+    this.request();
+  }
+
+  setGaussiansVisible(on) { this.viewer.set_gaussians_visible(on); this.request(); }
+
+  setAxes(origins, dirs, kinds, highlight = -1) {
+    this.viewer.set_axes(origins, dirs, kinds, highlight);
+    this.request();
+  }
+
+  clearAxes() { this.setAxes(new Float32Array(0), new Float32Array(0), new Uint32Array(0), -1); }
+
+  resetView() { this.viewer.reset_view(); this.request(); this.cameraMoved(); }
+  frameObject() { this.viewer.frame_object(); this.request(); this.cameraMoved(); }
+  cameraState() { return this.viewer.camera_state(); }
+  setCameraState(s) {
+    try { this.viewer.set_camera_state(s); this.request(); return true; } catch { return false; }
+  }
+
+  /** PNG of the current view; rendered offscreen so it works on WebGPU and WebGL2 alike. */
+  async screenshot() {
+    const dpr = window.devicePixelRatio || 1;
+    const w = Math.round(this.canvas.clientWidth * dpr), h = Math.round(this.canvas.clientHeight * dpr);
+    let rgba = null;
+    try {
+      rgba = await this.viewer.render_offscreen_rgba(w, h);
+    } catch (e) {
+      console.warn('offscreen render failed, capturing the canvas instead', e);
+    }
+    if (rgba && rgba.length === w * h * 4) {
+      const c = document.createElement('canvas');
+      c.width = w; c.height = h;
+      c.getContext('2d').putImageData(new ImageData(new Uint8ClampedArray(rgba.buffer, rgba.byteOffset, rgba.length), w, h), 0, 0);
+      return await new Promise((res) => c.toBlob(res, 'image/png'));
+    }
+    // The canvas is only readable in the task that rendered it (WebGPU): render, then capture.
+    this.renderNow();
+    return await new Promise((res) => this.canvas.toBlob(res, 'image/png'));
+  }
+}
+
+/** Light blue-grey tint by height (y), so the shape reads before a fit. */
+export function neutralColors(points) {
+  const n = points.length / 3;
+  let lo = Infinity, hi = -Infinity;
+  for (let i = 0; i < n; i++) { const y = points[3 * i + 1]; if (y < lo) lo = y; if (y > hi) hi = y; }
+  const span = hi - lo || 1;
+  const out = new Uint8Array(n * 4);
+  for (let i = 0; i < n; i++) {
+    const t = (points[3 * i + 1] - lo) / span;
+    const s = 0.72 + 0.28 * t;
+    out[4 * i] = NEUTRAL[0] * s;
+    out[4 * i + 1] = NEUTRAL[1] * s;
+    out[4 * i + 2] = Math.min(255, NEUTRAL[2] * s + 20);
+    out[4 * i + 3] = 255;
+  }
+  return out;
+}

@@ -1,0 +1,92 @@
+// Module worker running one job of the core (wasm): parsing PLY files, generating a
+// built-in example, one Step-1 candidate (one part count m), or finishing (model
+// selection + Steps 2–3 + metrics). Results go back as transferable typed arrays.
+//
+// Messages in:  {id, type: 'parse', files: [{name, bytes: ArrayBuffer}]}
+//               {id, type: 'example', name, seed}
+//               {id, type: 'start', frames: [Float32Array], names, m, options}
+//               {id, type: 'finish', frames, names, candidates: [string], options, gt?, heldout?}
+// Messages out: {id, type: 'progress', ...} (≤ ~20/s), {id, type: 'result', ...}, {id, type: 'error', message}
+// Cancel: the page terminates the worker (a running wasm loop cannot read messages).
+import init, * as gsart from './pkg/gsart.js';
+
+const ready = init();
+
+function buffersOf(list) {
+  const out = [];
+  for (const a of list) if (a && a.buffer instanceof ArrayBuffer && !out.includes(a.buffer)) out.push(a.buffer);
+  return out;
+}
+
+function errorMessage(e) {
+  if (e instanceof Error) return e.message;
+  return String(e);
+}
+
+function postProgress(id, p) {
+  const msg = { id, type: 'progress', ...p };
+  const transfer = p.snapshot ? buffersOf(Object.values(p.snapshot)) : [];
+  self.postMessage(msg, transfer);
+}
+
+async function handle(msg) {
+  await ready;
+  const { id } = msg;
+  switch (msg.type) {
+    case 'parse': {
+      // One entry per file (natural order) so one bad file never hides the others.
+      const out = gsart.parse_plys(msg.files.map((f) => f.name), msg.files.map((f) => new Uint8Array(f.bytes)));
+      for (const r of out) {
+        if (r.error) self.postMessage({ id, type: 'parsed', name: r.name, error: r.error });
+        else self.postMessage({ id, type: 'parsed', name: r.name, points: r.points, labels: r.labels ?? null },
+          buffersOf([r.points, r.labels]));
+      }
+      self.postMessage({ id, type: 'result' });
+      break;
+    }
+    case 'example': {
+      const ex = gsart.generate_example(msg.name, BigInt(msg.seed ?? 0));
+      const arrays = [];
+      for (const f of [...ex.frames, ...ex.heldout]) arrays.push(f.points, f.labels);
+      self.postMessage({ id, type: 'result', example: ex }, buffersOf(arrays));
+      break;
+    }
+    case 'start': {
+      const working = gsart.working_clouds(msg.frames, msg.names, msg.options);
+      self.postMessage({ id, type: 'working', m: msg.m, frames: working }, buffersOf(working));
+      const t0 = performance.now();
+      const candidate = gsart.fit_candidate(msg.frames, msg.names, msg.m, msg.options,
+        (p) => postProgress(id, { m: msg.m, ...p }));
+      self.postMessage({ id, type: 'result', m: msg.m, candidate: candidate.json, loss: candidate.loss,
+        ms: performance.now() - t0 });
+      break;
+    }
+    case 'finish': {
+      const t0 = performance.now();
+      const result = gsart.finish(msg.frames, msg.names, msg.candidates, msg.options,
+        (p) => postProgress(id, p));
+      let metrics = null;
+      let metricsError = null;
+      if (msg.gt) {
+        postProgress(id, { stage: 'metrics', iter: 0, total: 1, losses: {} });
+        try {
+          metrics = gsart.evaluate(result, msg.frames, msg.names, msg.gt,
+            msg.heldout?.frames ?? [], msg.heldout?.names ?? []);
+        } catch (e) {
+          metricsError = errorMessage(e);
+        }
+        postProgress(id, { stage: 'metrics', iter: 1, total: 1, losses: {} });
+      }
+      self.postMessage({ id, type: 'result', result, metrics, metricsError, ms: performance.now() - t0 });
+      break;
+    }
+    default:
+      throw new Error(`unknown message type ${msg.type}`);
+  }
+}
+
+self.onmessage = (ev) => {
+  handle(ev.data).catch((e) => {
+    self.postMessage({ id: ev.data?.id, type: 'error', message: errorMessage(e) });
+  });
+};
