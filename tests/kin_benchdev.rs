@@ -3,17 +3,15 @@
 //! joint type must be right, axes within 5°, revolute pivots within 2% of the object
 //! size, and no two distinct ground-truth parts may be merged.
 
-use glam::{DMat4, DVec3};
+use glam::DMat4;
 use gsart::io::gt::GroundTruth;
 use gsart::io::result::FitResult;
 use gsart::kinematics::chain::Chain;
-use gsart::kinematics::screw::{axis_angle_deg, point_line_distance};
-use gsart::kinematics::tree::reroot;
 use gsart::kinematics::{build_articulated, KinOptions};
 use gsart::pipeline::Control;
 
 mod kin_common;
-use kin_common::{evaluate, load, sequences, Seq, BENCH};
+use kin_common::{evaluate, load, sequences, Errors, Seq, BENCH};
 
 fn run(seq: &Seq, opts: &KinOptions) -> (FitResult, gsart::kinematics::KinReport, f64) {
     let t0 = std::time::Instant::now();

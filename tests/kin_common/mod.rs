@@ -81,6 +81,8 @@ pub struct Errors {
     pub type_errors: usize,
     pub max_axis_deg: f64,
     pub max_pivot: f64,
+    /// Per matched joint: (child, axis error °, pivot error).
+    pub per_joint: Vec<(usize, f64, f64)>,
 }
 
 /// Tree, joint-type, axis and pivot errors of a result against the ground truth.
@@ -96,6 +98,7 @@ pub fn evaluate(seq: &Seq, res: &FitResult) -> Errors {
     let mut type_errors = 0;
     let mut max_axis_deg: f64 = 0.0;
     let mut max_pivot: f64 = 0.0;
+    let mut per_joint = Vec::new();
     let c = res.canonical_frame;
     for j in res.joints.as_ref().unwrap() {
         // The ground-truth joint of this (undirected) edge.
@@ -119,12 +122,16 @@ pub fn evaluate(seq: &Seq, res: &FitResult) -> Errors {
         let gpivot = m.transform_point3(g.pivot_world_frame0);
         let axis = DVec3::from(j.axis);
         let pivot = DVec3::from(j.pivot);
-        max_axis_deg = max_axis_deg.max(axis_angle_deg(axis, gaxis));
+        let ad = axis_angle_deg(axis, gaxis);
+        max_axis_deg = max_axis_deg.max(ad);
+        let mut pd = 0.0;
         if g.joint_type == gsart::io::gt::JointType::Revolute {
             let d = point_line_distance(pivot, gpivot, gaxis)
                 .max(point_line_distance(gpivot, pivot, axis));
             max_pivot = max_pivot.max(d);
+            pd = d;
         }
+        per_joint.push((j.child, ad, pd));
     }
     Errors {
         tree_mismatch,
@@ -132,5 +139,6 @@ pub fn evaluate(seq: &Seq, res: &FitResult) -> Errors {
         type_errors,
         max_axis_deg,
         max_pivot,
+        per_joint,
     }
 }
