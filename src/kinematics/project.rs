@@ -132,6 +132,7 @@ pub fn project_joints(
         }),
         joints: Some(joints),
         root_motion: Some(fk.iter().map(|f| to_row_major(&f[root])).collect()),
+        points: None,
         info: None,
     };
     Ok((result, residuals))

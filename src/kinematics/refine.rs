@@ -508,6 +508,7 @@ mod tests {
             }),
             joints: Some(joints),
             root_motion: Some(root_motion),
+            points: None,
             info: None,
         };
         // observed frames: the source moved by a slightly different chain + fresh noise
