@@ -3,7 +3,8 @@
 //! segmented points, moved to every frame t, match the observed cloud Xᵗ.
 //!
 //! Loss: Σₜ L_CD(FK_t(X_c), Xᵗ) + λ·L_EMD over t ≠ c (λ = 0.3), with L_CD the
-//! bidirectional squared Chamfer (means) on seeded subsamples and L_EMD the mean squared
+//! bidirectional squared Chamfer (means, nearest neighbours through `geom::knn::Grid`)
+//! on seeded subsamples and L_EMD the mean squared
 //! distance under the optimal one-to-one assignment (`geom::assignment::Lap`, exact
 //! linear assignment) between the first `emd_sample` points of both subsamples. The
 //! assignment is recomputed every `emd_every` iterations and held fixed in between (its
@@ -33,6 +34,7 @@ use serde::Serialize;
 use super::chain::screw_exp;
 use super::project::bfs_order;
 use crate::geom::assignment::Lap;
+use crate::geom::knn::Grid;
 use crate::geom::se3::{from_row_major, to_row_major};
 use crate::io::gt::JointType;
 use crate::io::result::FitResult;
@@ -175,32 +177,26 @@ fn left_jacobian(phi: DVec3) -> DMat3 {
 }
 
 /// Bidirectional squared Chamfer (means) between `y` and `x`, with its gradient on `y`
-/// written into `g` (brute force: both sets are small subsamples).
-fn chamfer(y: &[Vec3], x: &[Vec3], g: &mut [Vec3], nn_x: &mut [(f32, u32)]) -> f64 {
+/// written into `g`. `xg` indexes `x`; `yg` is scratch, rebuilt on `y`.
+fn chamfer(y: &[Vec3], x: &[Vec3], xg: &Grid, yg: &mut Grid, g: &mut [Vec3]) -> f64 {
+    g.iter_mut().for_each(|v| *v = Vec3::ZERO);
     if y.is_empty() || x.is_empty() {
-        g.iter_mut().for_each(|v| *v = Vec3::ZERO);
         return 0.0;
     }
-    nn_x.iter_mut().for_each(|v| *v = (f32::INFINITY, 0));
     let (ny, nx) = (y.len() as f32, x.len() as f32);
     let mut loss = 0.0f64;
     for (i, yi) in y.iter().enumerate() {
-        let mut best = (f32::INFINITY, 0usize);
-        for (m, xm) in x.iter().enumerate() {
-            let d = yi.distance_squared(*xm);
-            if d < best.0 {
-                best = (d, m);
-            }
-            if d < nn_x[m].0 {
-                nn_x[m] = (d, i as u32);
-            }
+        if let Some((j, d)) = xg.nearest(*yi) {
+            loss += d as f64 / ny as f64;
+            g[i] = (*yi - x[j as usize]) * (2.0 / ny);
         }
-        loss += best.0 as f64 / ny as f64;
-        g[i] = (*yi - x[best.1]) * (2.0 / ny);
     }
-    for (m, &(d, i)) in nn_x.iter().enumerate() {
-        loss += d as f64 / nx as f64;
-        g[i as usize] += (y[i as usize] - x[m]) * (2.0 / nx);
+    yg.rebuild(y);
+    for xm in x {
+        if let Some((i, d)) = yg.nearest(*xm) {
+            loss += d as f64 / nx as f64;
+            g[i as usize] += (y[i as usize] - *xm) * (2.0 / nx);
+        }
     }
     loss
 }
@@ -210,13 +206,14 @@ pub(crate) struct Data {
     pub src: Vec<DVec3>,
     pub src_part: Vec<usize>,
     pub targets: Vec<Vec<Vec3>>,
+    /// Nearest-neighbour index of each frame's targets.
+    pub grids: Vec<Grid>,
 }
 
-/// A fixed EMD matching: `lambda`, matched count and, per frame, the target index
-/// (into `targets[t]`) of each of the first `n` source points.
+/// A fixed EMD matching: `lambda` and, per frame, the target index (into
+/// `targets[t]`) of each of the first source points.
 pub(crate) struct Matching {
     pub lambda: f64,
-    pub n: usize,
     pub cols: Vec<Vec<usize>>,
 }
 
@@ -251,7 +248,7 @@ pub(crate) fn assign(
             out.clear();
         }
     }
-    Matching { lambda, n, cols }
+    Matching { lambda, cols }
 }
 
 /// Loss and gradient with respect to the flat parameters (Chamfer, plus the EMD of a
@@ -266,18 +263,18 @@ pub(crate) fn loss_grad(
     let mut gbuf = vec![0.0; if grad.is_some() { m.len() } else { 0 }];
     let mut y = vec![Vec3::ZERO; d.src.len()];
     let mut g = vec![Vec3::ZERO; d.src.len()];
+    let mut ygrid = Grid::default();
     let mut total = 0.0;
     for t in 0..m.k {
         if t == m.c {
             continue;
         }
         let tgt = &d.targets[t];
-        let mut nn = vec![(0.0f32, 0u32); tgt.len()];
         let poses = m.poses(x, t);
         for (i, (s, &p)) in d.src.iter().zip(&d.src_part).enumerate() {
             y[i] = poses[p].transform_point3(*s).as_vec3();
         }
-        total += chamfer(&y, tgt, &mut g, &mut nn);
+        total += chamfer(&y, tgt, &d.grids[t], &mut ygrid, &mut g);
         if let Some(mt) = matching {
             let cols = &mt.cols[t];
             let w = mt.lambda / cols.len().max(1) as f64;
@@ -377,14 +374,16 @@ fn build_data(result: &FitResult, points: &[Vec<Vec3>], n: usize, rng: &mut StdR
     let idx = sample_points(&points[c], n, rng);
     let src = idx.iter().map(|&i| points[c][i].as_dvec3()).collect();
     let src_part = idx.iter().map(|&i| result.labels[c][i] as usize).collect();
-    let targets = points
+    let targets: Vec<Vec<Vec3>> = points
         .iter()
         .map(|f| sample_points(f, n, rng).into_iter().map(|i| f[i]).collect())
         .collect();
+    let grids = targets.iter().map(|t| Grid::new(t)).collect();
     Data {
         src,
         src_part,
         targets,
+        grids,
     }
 }
 
