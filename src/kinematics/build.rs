@@ -336,7 +336,7 @@ mod tests {
     fn bad_inputs_are_typed_errors() {
         let (points, mut labels, poses) = scene();
         let opts = KinOptions::default();
-        let mut go = |l: &[Vec<u32>], c: usize| {
+        let go = |l: &[Vec<u32>], c: usize| {
             build_articulated(&points, l, &poses, c, &opts, &|| 0.0, &mut |_| {
                 Control::Continue
             })

@@ -1,5 +1,5 @@
-//! Shared helpers of the kinematics integration tests: a test-only reader of the fixed
-//! bench-dev PLY layout and a sequence loader.
+//! Shared helpers of the kinematics integration tests: bench-dev sequence loading
+//! (through `io::ply::read_ply`) and the tree/joint error evaluation.
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
@@ -12,35 +12,14 @@ use gsart::kinematics::tree::reroot;
 
 pub const BENCH: &str = "/work/shared/bench-dev/full";
 
-/// Test-only reader of the fixed bench-dev binary layout (x y z f32, part i32).
+/// Points and ground-truth labels of a bench-dev PLY frame (the crate's reader).
 pub fn read_bench_ply(path: &Path) -> (Vec<Vec3>, Vec<u32>) {
     let bytes = std::fs::read(path).unwrap();
-    let marker = b"end_header\n";
-    let start = bytes
-        .windows(marker.len())
-        .position(|w| w == marker)
-        .unwrap()
-        + marker.len();
-    let header = std::str::from_utf8(&bytes[..start]).unwrap();
-    assert!(header.contains("binary_little_endian"), "{path:?}");
-    let n: usize = header
-        .lines()
-        .find_map(|l| l.strip_prefix("element vertex "))
-        .unwrap()
-        .trim()
-        .parse()
-        .unwrap();
-    let body = &bytes[start..];
-    assert_eq!(body.len(), n * 16);
-    let f = |o: usize| f32::from_le_bytes(body[o..o + 4].try_into().unwrap());
-    let mut pts = Vec::with_capacity(n);
-    let mut lab = Vec::with_capacity(n);
-    for i in 0..n {
-        let o = i * 16;
-        pts.push(Vec3::new(f(o), f(o + 4), f(o + 8)));
-        lab.push(i32::from_le_bytes(body[o + 12..o + 16].try_into().unwrap()) as u32);
-    }
-    (pts, lab)
+    let cloud = gsart::io::ply::read_ply(&bytes, &path.to_string_lossy()).unwrap();
+    let labels = cloud
+        .labels
+        .expect("bench-dev frames carry a `part` property");
+    (cloud.points, labels)
 }
 
 pub struct Seq {
