@@ -99,3 +99,29 @@ pub enum Control {
     Continue,
     Cancel,
 }
+
+/// Step 1 for one candidate part count m (what one wasm worker runs).
+pub fn fit_step1_single(
+    seq: &crate::io::sequence::Sequence,
+    m: usize,
+    opts: &FitOptions,
+    cb: &mut dyn FnMut(&Progress) -> Control,
+) -> crate::Result<crate::fit::Step1Result> {
+    let prep = crate::fit::select::prepare(seq, opts)?;
+    crate::fit::select::run_candidate(&prep, m, opts, cb)
+}
+
+/// Step 1 with model selection over the part-count range (one thread per
+/// candidate natively; sequential in wasm).
+pub fn fit_step1(
+    seq: &crate::io::sequence::Sequence,
+    opts: &FitOptions,
+    cb: &(dyn Fn(&Progress) -> Control + Sync),
+) -> crate::Result<crate::fit::Step1Result> {
+    crate::fit::select::select(seq, opts, cb)
+}
+
+/// Default inclusive range of part counts chosen from the data.
+pub fn default_part_range(seq: &crate::io::sequence::Sequence) -> (usize, usize) {
+    crate::fit::select::default_part_range(seq)
+}

@@ -3,80 +3,17 @@
 //! joint type must be right, axes within 5°, revolute pivots within 2% of the object
 //! size, and no two distinct ground-truth parts may be merged.
 
-use std::path::{Path, PathBuf};
-
-use glam::{DMat4, DVec3, Vec3};
+use glam::{DMat4, DVec3};
 use gsart::io::gt::GroundTruth;
 use gsart::io::result::FitResult;
+use gsart::kinematics::chain::Chain;
 use gsart::kinematics::screw::{axis_angle_deg, point_line_distance};
 use gsart::kinematics::tree::reroot;
 use gsart::kinematics::{build_articulated, KinOptions};
 use gsart::pipeline::Control;
 
-const BENCH: &str = "/work/shared/bench-dev/full";
-
-/// Test-only reader of the fixed bench-dev binary layout (x y z f32, part i32).
-fn read_bench_ply(path: &Path) -> (Vec<Vec3>, Vec<u32>) {
-    let bytes = std::fs::read(path).unwrap();
-    let marker = b"end_header\n";
-    let start = bytes
-        .windows(marker.len())
-        .position(|w| w == marker)
-        .unwrap()
-        + marker.len();
-    let header = std::str::from_utf8(&bytes[..start]).unwrap();
-    assert!(header.contains("binary_little_endian"), "{path:?}");
-    let n: usize = header
-        .lines()
-        .find_map(|l| l.strip_prefix("element vertex "))
-        .unwrap()
-        .trim()
-        .parse()
-        .unwrap();
-    let body = &bytes[start..];
-    assert_eq!(body.len(), n * 16);
-    let f = |o: usize| f32::from_le_bytes(body[o..o + 4].try_into().unwrap());
-    let mut pts = Vec::with_capacity(n);
-    let mut lab = Vec::with_capacity(n);
-    for i in 0..n {
-        let o = i * 16;
-        pts.push(Vec3::new(f(o), f(o + 4), f(o + 8)));
-        lab.push(i32::from_le_bytes(body[o + 12..o + 16].try_into().unwrap()) as u32);
-    }
-    (pts, lab)
-}
-
-pub struct Seq {
-    pub name: String,
-    pub gt: GroundTruth,
-    pub points: Vec<Vec<Vec3>>,
-    pub labels: Vec<Vec<u32>>,
-}
-
-fn load(dir: &Path) -> Seq {
-    let text = std::fs::read_to_string(dir.join("gt.json")).unwrap();
-    let gt = GroundTruth::from_json(&text, "gt.json").unwrap();
-    let (points, labels) = gt
-        .frames
-        .iter()
-        .map(|f| read_bench_ply(&dir.join(f)))
-        .unzip();
-    Seq {
-        name: dir.file_name().unwrap().to_string_lossy().into_owned(),
-        gt,
-        points,
-        labels,
-    }
-}
-
-fn sequences() -> Vec<PathBuf> {
-    let Ok(rd) = std::fs::read_dir(BENCH) else {
-        return vec![];
-    };
-    let mut v: Vec<PathBuf> = rd.flatten().map(|e| e.path()).collect();
-    v.sort();
-    v
-}
+mod kin_common;
+use kin_common::{load, sequences, Seq, BENCH};
 
 struct Errors {
     tree_mismatch: usize,
@@ -137,6 +74,67 @@ fn evaluate(seq: &Seq, res: &FitResult) -> Errors {
     }
 }
 
+fn run(seq: &Seq, opts: &KinOptions) -> (FitResult, gsart::kinematics::KinReport, f64) {
+    let t0 = std::time::Instant::now();
+    let (res, rep) = build_articulated(
+        &seq.points,
+        &seq.labels,
+        &seq.gt.poses,
+        0,
+        opts,
+        &|| 0.0,
+        &mut |_| Control::Continue,
+    )
+    .unwrap();
+    (res, rep, t0.elapsed().as_secs_f64())
+}
+
+/// The result validates, and its poses are `Chain` forward kinematics of its joints.
+fn assert_fk_consistent(name: &str, res: &FitResult) {
+    res.validate(name).unwrap();
+    let chain = Chain::from_result(res).unwrap();
+    for k in 0..res.frames {
+        let poses = chain
+            .part_poses(&res.root_pose(k).unwrap(), &res.joint_states(k))
+            .unwrap();
+        for (p, m) in poses.iter().enumerate() {
+            assert!(
+                m.abs_diff_eq(res.pose(k, p).unwrap(), 1e-9),
+                "{name} frame {k} part {p}"
+            );
+        }
+    }
+}
+
+fn check(
+    seq: &Seq,
+    res: &FitResult,
+    rep: &gsart::kinematics::KinReport,
+    failures: &mut Vec<String>,
+) -> Errors {
+    let merged_ok = rep.parts == seq.gt.num_parts
+        && rep
+            .merge_map
+            .iter()
+            .enumerate()
+            .all(|(i, &m)| m as usize == i);
+    if !merged_ok {
+        failures.push(format!(
+            "{}: merged distinct parts {:?}",
+            seq.name, rep.merge_log
+        ));
+    }
+    assert_fk_consistent(&seq.name, res);
+    let e = evaluate(seq, res);
+    if e.tree_mismatch != 0 || e.type_errors != 0 || e.max_axis_deg > 5.0 || e.max_pivot > 0.02 {
+        failures.push(format!(
+            "{}: tree {} types {} axis {} pivot {}",
+            seq.name, e.tree_mismatch, e.type_errors, e.max_axis_deg, e.max_pivot
+        ));
+    }
+    e
+}
+
 #[test]
 fn gt_input_recovers_tree_and_joints() {
     let seqs = sequences();
@@ -147,62 +145,35 @@ fn gt_input_recovers_tree_and_joints() {
     let mut failures = Vec::new();
     for dir in seqs {
         let seq = load(&dir);
-        let canonical = 0;
-        let opts = KinOptions::default();
-        let (res, rep) = build_articulated(
-            &seq.points,
-            &seq.labels,
-            &seq.gt.poses,
-            canonical,
-            &opts,
-            &|| 0.0,
-            &mut |_| Control::Continue,
-        )
-        .unwrap();
-        let merged_ok = rep.parts == seq.gt.num_parts
-            && rep
-                .merge_map
-                .iter()
-                .enumerate()
-                .all(|(i, &m)| m as usize == i);
-        let e = evaluate(&seq, &res);
+        // Projection only: exact on exact input.
+        let opts = KinOptions {
+            refine: None,
+            ..Default::default()
+        };
+        let (res, rep, secs) = run(&seq, &opts);
+        let e = check(&seq, &res, &rep, &mut failures);
         eprintln!(
-            "{:<18} parts {:>2}/{:<2} root {:>2} tree-mismatch {} type-errors {} max-axis {:.4}° max-pivot {:.5} spacing {:.4} merges {}",
-            seq.name,
-            rep.parts,
-            seq.gt.num_parts,
-            e.root,
-            e.tree_mismatch,
-            e.type_errors,
-            e.max_axis_deg,
-            e.max_pivot,
-            rep.spacing,
-            rep.merge_log.len()
+            "{:<18} projection: parts {:>2}/{:<2} root {:>2} tree-mismatch {} type-errors {} max-axis {:.4}° max-pivot {:.5} spacing {:.4} merges {} ({secs:.2}s)",
+            seq.name, rep.parts, seq.gt.num_parts, e.root, e.tree_mismatch, e.type_errors,
+            e.max_axis_deg, e.max_pivot, rep.spacing, rep.merge_log.len()
         );
-        if !merged_ok {
-            failures.push(format!(
-                "{}: merged distinct parts {:?}",
-                seq.name, rep.merge_log
-            ));
-            continue;
-        }
-        if e.tree_mismatch != 0 || e.type_errors != 0 || e.max_axis_deg > 5.0 || e.max_pivot > 0.02
-        {
-            failures.push(format!(
-                "{}: tree {} types {} axis {} pivot {}",
-                seq.name, e.tree_mismatch, e.type_errors, e.max_axis_deg, e.max_pivot
-            ));
-        }
         // Output poses are the chain's forward kinematics and match the observed motion.
-        let c = canonical;
         for t in 0..res.frames {
             for p in 0..res.parts {
                 let m = gsart::geom::se3::from_row_major(&res.poses[t][p]);
                 let obs: DMat4 =
-                    seq.gt.poses[t][p] * gsart::geom::se3::rigid_inverse(&seq.gt.poses[c][p]);
+                    seq.gt.poses[t][p] * gsart::geom::se3::rigid_inverse(&seq.gt.poses[0][p]);
                 assert!(m.abs_diff_eq(obs, 1e-6), "{} frame {t} part {p}", seq.name);
             }
         }
+        // With refinement (Chamfer against the observed clouds).
+        let (res, rep, secs) = run(&seq, &KinOptions::default());
+        let e = check(&seq, &res, &rep, &mut failures);
+        let r = rep.refine.as_ref().unwrap();
+        eprintln!(
+            "{:<18} refined:    accepted {} loss {:.6} -> {:.6} max-axis {:.4}° max-pivot {:.5} ({secs:.2}s)",
+            seq.name, r.accepted, r.loss_before, r.loss_after, e.max_axis_deg, e.max_pivot
+        );
     }
     assert!(failures.is_empty(), "{failures:#?}");
 }

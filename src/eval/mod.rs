@@ -1,6 +1,128 @@
 //! Metrics of SPEC §5 (Reart-compatible): Rand index, reconstruction and flow
-//! error, tree edit distance, re-animation error.
+//! error, tree edit distance, re-animation error; [`evaluate`] computes them all.
 
 pub mod motion_error;
 pub mod rand_index;
+pub mod reanimation;
 pub mod tree_edit;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::io::gt::GroundTruth;
+use crate::io::result::FitResult;
+use crate::kinematics::chain::Chain;
+use crate::{Error, Result};
+
+/// All metrics of one result against its ground truth. Errors are ×100 (percent of
+/// the object's size on normalised data).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Metrics {
+    /// Rand index per frame, averaged over all frames.
+    pub mean_ri: f64,
+    /// Rand index on the canonical frame.
+    pub canonical_ri: f64,
+    pub reconstruction_error: f64,
+    pub flow_error: f64,
+    /// `None` when the result has no tree (Step 1 only) or the tree could not be
+    /// compared exactly (see `notes`).
+    pub tree_edit_distance: Option<usize>,
+    /// `None` when the result has no joints or the ground truth no held-out poses.
+    pub reanimation_error: Option<f64>,
+    /// Why an optional metric is absent.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
+}
+
+/// Evaluate `result` against `gt`. `canonical_points` and `canonical_labels` are the
+/// observed points of the result's canonical frame with their ground-truth labels
+/// (in the order of `result.labels[c]`); `frame_labels[k]` are the ground-truth labels
+/// of every point of frame k (in the order of `result.labels[k]`), for the mean RI.
+pub fn evaluate(
+    result: &FitResult,
+    gt: &GroundTruth,
+    canonical_points: &[Vec3],
+    canonical_labels: &[u32],
+    frame_labels: &[Vec<u32>],
+) -> Result<Metrics> {
+    let k = result.frames;
+    let c = result.canonical_frame;
+    if gt.num_frames() != k || result.labels.len() != k || frame_labels.len() != k || c >= k {
+        return Err(Error::Sequence(format!(
+            "the result has {k} frames (labels for {}), the ground truth {} and {} label frames were given",
+            result.labels.len(),
+            gt.num_frames(),
+            frame_labels.len()
+        )));
+    }
+    let pred_c = &result.labels[c];
+    if pred_c.len() != canonical_points.len() || canonical_labels.len() != canonical_points.len() {
+        return Err(Error::Sequence(format!(
+            "canonical frame {c}: {} points, {} ground-truth and {} predicted labels",
+            canonical_points.len(),
+            canonical_labels.len(),
+            pred_c.len()
+        )));
+    }
+    let mut ri_sum = 0.0;
+    for (t, (pred, truth)) in result.labels.iter().zip(frame_labels).enumerate() {
+        ri_sum += rand_index::rand_index(pred, truth)
+            .map_err(|e| Error::Sequence(format!("frame {t}: {e}")))?;
+    }
+    let mean_ri = ri_sum / k as f64;
+    let canonical_ri = rand_index::rand_index(pred_c, canonical_labels)?;
+    let motion =
+        motion_error::motion_errors(result, gt, canonical_points, pred_c, canonical_labels)?;
+
+    let mut notes = Vec::new();
+    let chain = match &result.tree {
+        Some(_) => Some(Chain::from_result(result)?),
+        None => None,
+    };
+    let tree_edit_distance = match &chain {
+        Some(ch) => match tree_edit::tree_edit_distance(ch.parent(), &gt.parent) {
+            Ok(d) => Some(d),
+            Err(e) => {
+                notes.push(e.to_string());
+                None
+            }
+        },
+        None => {
+            notes.push("no kinematic tree in the result: no tree edit distance".into());
+            None
+        }
+    };
+    let reanimation_error = match (&chain, &result.joints) {
+        (Some(ch), Some(_)) if !gt.heldout_poses.is_empty() => {
+            let root0 = result
+                .root_pose(0)
+                .ok_or_else(|| Error::Sequence("the result has no root pose at frame 0".into()))?;
+            Some(reanimation::reanimation_error(
+                ch,
+                &root0,
+                gt,
+                c,
+                canonical_points,
+                pred_c,
+                canonical_labels,
+            )?)
+        }
+        (Some(_), Some(_)) => {
+            notes.push("no held-out poses in the ground truth: no re-animation error".into());
+            None
+        }
+        _ => {
+            notes.push("no joints in the result: no re-animation error".into());
+            None
+        }
+    };
+    Ok(Metrics {
+        mean_ri,
+        canonical_ri,
+        reconstruction_error: motion.reconstruction,
+        flow_error: motion.flow,
+        tree_edit_distance,
+        reanimation_error,
+        notes,
+    })
+}

@@ -149,6 +149,7 @@ mod tests {
             tree: None,
             joints: None,
             root_motion: None,
+            points: None,
             info: None,
         }
     }

@@ -1,2 +1,43 @@
 //! Step 1: dynamic 3D Gaussians fitted to the sequence (model, losses with their
 //! gradients, optimiser, initialisation, schedule, model selection).
+
+pub mod adam;
+pub mod fitter;
+pub mod flow;
+pub mod gaussians;
+pub mod init;
+pub mod losses;
+pub mod rot6d;
+pub mod schedule;
+pub mod select;
+
+pub use gaussians::GaussianModel;
+
+/// Wall-clock timings of a Step-1 run (native only; zero in wasm, where the
+/// caller measures time itself).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Timings {
+    /// Total seconds of the whole Step 1 (all candidates).
+    pub total_s: f64,
+    /// Per candidate: (m, seconds, iterations).
+    pub per_candidate: Vec<(usize, f64, usize)>,
+}
+
+/// Result of Step 1 (the selected candidate).
+#[derive(Debug, Clone)]
+pub struct Step1Result {
+    pub model: GaussianModel,
+    /// Per frame, per working point: Gaussian index.
+    pub labels: Vec<Vec<u32>>,
+    /// Per frame: indices of the working points in the input frame (identity when
+    /// the frame was not downsampled).
+    pub working: Vec<Vec<u32>>,
+    /// Model-selection Chamfer of the selected candidate (`fitter::final_chamfer`).
+    pub final_chamfer: f64,
+    pub occlusion_used: bool,
+    pub iterations: usize,
+    pub m: usize,
+    /// Every candidate tried: (m, final Chamfer).
+    pub candidates: Vec<(usize, f64)>,
+    pub timings: Timings,
+}

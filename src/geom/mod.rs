@@ -1,4 +1,8 @@
 //! Geometry shared by every stage: rigid transforms, rotations, nearest neighbours,
-//! sampling and assignment.
+//! sampling and assignment, and the viewer's camera math.
 
+pub mod assignment;
+pub mod camera;
+pub mod fps;
+pub mod knn;
 pub mod se3;

@@ -5,3 +5,4 @@ pub mod gt;
 pub mod ply;
 pub mod result;
 pub mod sequence;
+pub mod urdf;

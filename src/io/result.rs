@@ -66,6 +66,10 @@ pub struct FitResult {
     /// Root part pose per frame (maps frame c to frame k).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub root_motion: Option<Vec<[f64; 16]>>,
+    /// The canonical frame's input points (same order as `labels[canonical_frame]`), so a
+    /// shared result can be viewed and re-posed without the input files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub points: Option<Vec<[f32; 3]>>,
     /// Free-form provenance: options, chosen m, timings, notes (e.g. downsampling).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub info: Option<serde_json::Value>,
@@ -297,6 +301,7 @@ impl FitResult {
             }),
             joints: Some(joints),
             root_motion: Some(root_motion),
+            points: None,
             info: Some(serde_json::json!({ "source": "ground truth", "sequence": gt.sequence })),
         })
     }

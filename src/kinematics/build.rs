@@ -9,6 +9,7 @@ use serde::Serialize;
 
 use super::merge::{merge_parts, MergeEvent, MergeOptions};
 use super::project::{motions_from_canonical, project_joints, JointResidual};
+use super::refine::{refine, RefineOptions, RefineReport};
 use super::spatial::pair_distances;
 use super::tree::{least_motion_root, pair_costs, part_motion, spanning_tree};
 use crate::geom::se3::rigid_inverse;
@@ -21,6 +22,8 @@ pub struct KinOptions {
     pub merge: MergeOptions,
     /// Joint limits: state range widened by this fraction on each side.
     pub limit_pad: f64,
+    /// `None` skips the refinement (projection only).
+    pub refine: Option<RefineOptions>,
 }
 
 impl Default for KinOptions {
@@ -28,6 +31,7 @@ impl Default for KinOptions {
         KinOptions {
             merge: MergeOptions::default(),
             limit_pad: 0.0,
+            refine: Some(RefineOptions::default()),
         }
     }
 }
@@ -50,6 +54,7 @@ pub struct KinReport {
     pub root: usize,
     pub parent: Vec<i64>,
     pub joints: Vec<JointResidual>,
+    pub refine: Option<RefineReport>,
     /// (stage, seconds) from the caller's clock.
     pub timings: Vec<(String, f64)>,
 }
@@ -196,7 +201,7 @@ pub fn build_articulated(
     progress_to(progress, Stage::Tree, 2, 3, vec![])?;
 
     // Joints.
-    let (result, residuals) = project_joints(
+    let (mut result, residuals) = project_joints(
         &merged.poses,
         &parent,
         canonical,
@@ -207,6 +212,15 @@ pub fn build_articulated(
     let t3 = clock();
     timings.push(("projection".to_string(), t3 - t2));
     progress_to(progress, Stage::Joints, 0, 1, vec![])?;
+
+    let refine_report = match &opts.refine {
+        Some(ro) => {
+            let rep = refine(&mut result, points, ro, opts.limit_pad, progress)?;
+            timings.push(("refinement".to_string(), clock() - t3));
+            Some(rep)
+        }
+        None => None,
+    };
 
     let report = KinReport {
         merge_map: merged.map,
@@ -220,6 +234,7 @@ pub fn build_articulated(
         root,
         parent,
         joints: residuals,
+        refine: refine_report,
         timings,
     };
     Ok((result, report))

@@ -5,6 +5,7 @@ pub mod build;
 pub mod chain;
 pub mod merge;
 pub mod project;
+pub mod refine;
 pub mod screw;
 pub mod spatial;
 pub mod tree;

@@ -10,7 +10,8 @@
 use glam::{DMat4, DVec3};
 use serde::Serialize;
 
-use super::screw::{fit_screw, joint_motion, one_dof_loss};
+use super::chain::screw_exp;
+use super::screw::{fit_screw, one_dof_loss};
 use crate::geom::se3::{rigid_inverse, to_row_major};
 use crate::io::gt::JointType;
 use crate::io::result::{FitResult, ResultJoint, ResultTree, FORMAT, VERSION};
@@ -88,7 +89,7 @@ pub fn project_joints(
         fit.states[canonical] = 0.0;
         let loss = one_dof_loss(&rel, fit.joint_type, fit.axis, fit.pivot, &fit.states);
         for (f, &s) in fk.iter_mut().zip(&fit.states) {
-            f[b] = f[a] * joint_motion(fit.joint_type, fit.axis, fit.pivot, s);
+            f[b] = f[a] * screw_exp(fit.joint_type, fit.axis, fit.pivot, s);
         }
         let lo = fit.states.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = fit.states.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -131,6 +132,7 @@ pub fn project_joints(
         }),
         joints: Some(joints),
         root_motion: Some(fk.iter().map(|f| to_row_major(&f[root])).collect()),
+        points: None,
         info: None,
     };
     Ok((result, residuals))
@@ -153,8 +155,8 @@ mod tests {
             .map(|t| {
                 let s = t as f64;
                 let r = DMat4::from_translation(DVec3::Z * 0.05 * s) * base;
-                let m1 = joint_motion(JointType::Revolute, ax1, pv1, 0.3 * s);
-                let m2 = joint_motion(JointType::Prismatic, ax2, DVec3::ZERO, 0.1 * s);
+                let m1 = screw_exp(JointType::Revolute, ax1, pv1, 0.3 * s);
+                let m2 = screw_exp(JointType::Prismatic, ax2, DVec3::ZERO, 0.1 * s);
                 let a0 = DMat4::from_translation(DVec3::Z * 0.05 * s);
                 vec![r, a0 * m1 * base, a0 * m1 * m2 * base]
             })

@@ -13,6 +13,7 @@
 use glam::{DMat3, DMat4, DQuat, DVec3};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
+use super::chain::screw_exp;
 use crate::geom::se3::rigid_inverse;
 use crate::io::gt::JointType;
 
@@ -34,23 +35,6 @@ pub struct ScrewFit {
     pub loss: f64,
     pub loss_revolute: f64,
     pub loss_prismatic: f64,
-}
-
-/// The motion of a single 1-DOF joint: exp([S] q) with S = (ω, −ω×p) (revolute) or
-/// (0, ω) (prismatic), world frame at the canonical frame.
-pub fn joint_motion(joint_type: JointType, axis: DVec3, pivot: DVec3, q: f64) -> DMat4 {
-    match joint_type {
-        JointType::Revolute => {
-            let r = DMat3::from_axis_angle(axis, q);
-            DMat4::from_cols(
-                r.x_axis.extend(0.0),
-                r.y_axis.extend(0.0),
-                r.z_axis.extend(0.0),
-                (pivot - r * pivot).extend(1.0),
-            )
-        }
-        JointType::Prismatic => DMat4::from_translation(axis * q),
-    }
 }
 
 /// Qₖ = (Aᵢᵏ)⁻¹ Aⱼᵏ for every frame, Aᵖᵏ = Tₚᵏ (Tₚᶜ)⁻¹ (`poses[k][p]`).
@@ -84,7 +68,7 @@ pub fn one_dof_loss(
     rel.iter()
         .zip(states)
         .map(|(q, &s)| {
-            let si = rigid_inverse(&joint_motion(joint_type, axis, pivot, s));
+            let si = rigid_inverse(&screw_exp(joint_type, axis, pivot, s));
             dev_from_identity(&(*q * si))
         })
         .sum()
@@ -301,7 +285,7 @@ mod tests {
     ) -> Vec<DMat4> {
         states
             .iter()
-            .map(|&s| noisy(joint_motion(jt, axis, pivot, s), rng, sigma))
+            .map(|&s| noisy(screw_exp(jt, axis, pivot, s), rng, sigma))
             .collect()
     }
 

@@ -4,14 +4,20 @@
 //! Only conversions live here; every decision is made by the core.
 
 use glam::{DMat3, DMat4, DVec3, Vec3};
-use js_sys::{Float32Array, Object, Reflect, Uint32Array};
+use js_sys::{
+    Array, Float32Array, Float64Array, Function, Object, Reflect, Uint32Array, Uint8Array,
+};
 use serde::Serialize;
 use wasm_bindgen::prelude::*;
 
 use crate::geom::se3::{from_row_major, rigid_inverse};
 use crate::io::gt::JointType;
+use crate::io::ply::write_ply;
 use crate::io::result::FitResult;
+use crate::io::sequence::{natural_cmp, Frame, LoadOptions, Sequence};
 use crate::kinematics::chain::Chain;
+use crate::pipeline::{Control, FitOptions, Progress, Stage};
+use crate::synth::{self, ObjectKind, SynthOptions};
 
 /// Installs the panic hook so a bug shows a readable message in the console.
 #[wasm_bindgen(start)]
@@ -42,8 +48,16 @@ fn to_js<T: Serialize + ?Sized>(v: &T) -> Result<JsValue, JsError> {
         .map_err(|e| JsError::new(&format!("internal: cannot convert to JS: {e}")))
 }
 
+fn flat_points(points: &[Vec3]) -> Float32Array {
+    let mut flat = Vec::with_capacity(points.len() * 3);
+    for p in points {
+        flat.extend_from_slice(&[p.x, p.y, p.z]);
+    }
+    Float32Array::from(flat.as_slice())
+}
+
 fn points_from_flat(flat: &[f32], name: &str) -> Result<Vec<Vec3>, JsError> {
-    if !flat.len().is_multiple_of(3) {
+    if flat.len() % 3 != 0 {
         return Err(js_err(crate::Error::input(
             name,
             format!("{} coordinates is not a multiple of 3", flat.len()),
@@ -53,6 +67,129 @@ fn points_from_flat(flat: &[f32], name: &str) -> Result<Vec<Vec3>, JsError> {
         .chunks_exact(3)
         .map(|c| Vec3::new(c[0], c[1], c[2]))
         .collect())
+}
+
+fn frame_js(frame: &Frame) -> Object {
+    let o = Object::new();
+    set(&o, "name", &JsValue::from_str(&frame.name));
+    set(&o, "points", &flat_points(&frame.points));
+    match &frame.labels {
+        Some(l) => set(&o, "labels", &Uint32Array::from(l.as_slice())),
+        None => set(&o, "labels", &JsValue::NULL),
+    }
+    o
+}
+
+/// A sequence from the page's frames (`Float32Array` xyz per frame) and their names.
+fn sequence_from_js(frames: &Array, names: &Array) -> Result<Sequence, JsError> {
+    let mut out = Vec::with_capacity(frames.length() as usize);
+    for (k, f) in frames.iter().enumerate() {
+        let name = names
+            .get(k as u32)
+            .as_string()
+            .unwrap_or_else(|| format!("frame {k}"));
+        let arr: Float32Array = f
+            .dyn_into()
+            .map_err(|_| JsError::new(&format!("{name}: frame data is not a Float32Array")))?;
+        let points = points_from_flat(&arr.to_vec(), &name)?;
+        out.push(Frame {
+            name,
+            points,
+            labels: None,
+        });
+    }
+    Sequence::from_frames(out).map_err(js_err)
+}
+
+fn options_from_js(options: JsValue) -> Result<FitOptions, JsError> {
+    if options.is_undefined() || options.is_null() {
+        return Ok(FitOptions::default());
+    }
+    serde_wasm_bindgen::from_value(options)
+        .map_err(|e| JsError::new(&format!("invalid fit options: {e}")))
+}
+
+// ------------------------------------------------------------------ loading
+
+/// Parses PLY files given as parallel arrays of names and `Uint8Array` bytes.
+/// Each file gets its own entry `{name, points, labels}` or `{name, error}` (the
+/// error names the file and the problem), in natural filename order.
+#[wasm_bindgen]
+pub fn parse_plys(names: Vec<String>, buffers: Array) -> Result<Array, JsError> {
+    if names.len() != buffers.length() as usize {
+        return Err(JsError::new(
+            "parse_plys: names and buffers differ in length",
+        ));
+    }
+    let files: Vec<(String, Vec<u8>)> = names
+        .into_iter()
+        .zip(buffers.iter())
+        .map(|(n, b)| (n, Uint8Array::new(&b).to_vec()))
+        .collect();
+    let out = Array::new();
+    for (name, result) in Sequence::from_named_bytes(files, LoadOptions::default()) {
+        let o = match result {
+            Ok(frame) => frame_js(&frame),
+            Err(e) => {
+                let o = Object::new();
+                set(&o, "name", &JsValue::from_str(&name));
+                set(&o, "error", &JsValue::from_str(&e.to_string()));
+                o
+            }
+        };
+        out.push(&o);
+    }
+    Ok(out)
+}
+
+/// Indices that put `names` in natural order (`f2` before `f10`), as the core sorts files.
+#[wasm_bindgen]
+pub fn natural_order(names: Vec<String>) -> Vec<u32> {
+    let mut idx: Vec<u32> = (0..names.len() as u32).collect();
+    idx.sort_by(|&a, &b| natural_cmp(&names[a as usize], &names[b as usize]));
+    idx
+}
+
+/// Names of the built-in examples, in menu order.
+#[wasm_bindgen]
+pub fn example_names() -> Vec<String> {
+    synth::example_names()
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+}
+
+/// One-line description of a built-in example (for tooltips).
+#[wasm_bindgen]
+pub fn example_description(name: &str) -> Result<String, JsError> {
+    let kind: ObjectKind = name.parse().map_err(js_err)?;
+    Ok(kind.describe().to_string())
+}
+
+/// Generates a built-in example: `{name, frames: [{name, points, labels}], gt: string,
+/// heldout: [{name, points, labels}]}` (the ground truth as `gt.json` text).
+#[wasm_bindgen]
+pub fn generate_example(name: &str, seed: u64) -> Result<JsValue, JsError> {
+    let kind: ObjectKind = name.parse().map_err(js_err)?;
+    let opts = SynthOptions {
+        seed,
+        ..SynthOptions::new(kind)
+    };
+    let out = synth::generate(&opts).map_err(js_err)?;
+    let o = Object::new();
+    set(&o, "name", &JsValue::from_str(kind.name()));
+    let frames = Array::new();
+    for f in &out.sequence.frames {
+        frames.push(&frame_js(f));
+    }
+    set(&o, "frames", &frames);
+    let heldout = Array::new();
+    for f in &out.heldout {
+        heldout.push(&frame_js(f));
+    }
+    set(&o, "heldout", &heldout);
+    set(&o, "gt", &JsValue::from_str(&synth::gt_json(&out)));
+    Ok(o.into())
 }
 
 // ------------------------------------------------------------------ the model
@@ -282,6 +419,30 @@ impl Model {
         }
         serde_json::to_string(&value).map_err(|e| JsError::new(&format!("internal: {e}")))
     }
+
+    /// Frame k as a binary PLY with `x y z part` (the input points when loaded, else the
+    /// canonical points moved to frame k by the fitted part poses).
+    pub fn segmented_ply(&self, k: usize) -> Result<Uint8Array, JsError> {
+        let (points, src) = self.source(k)?;
+        let labels = &self.result.labels[src];
+        let posed: Vec<Vec3> = if src == k {
+            points.to_vec()
+        } else {
+            // Canonical points carried to frame k by the fitted part poses.
+            let moves: Vec<glam::Mat4> = (0..self.result.parts)
+                .map(|p| self.pose_of(k, p).unwrap_or(DMat4::IDENTITY).as_mat4())
+                .collect();
+            points
+                .iter()
+                .zip(labels)
+                .map(|(x, &l)| moves[l as usize].transform_point3(*x))
+                .collect()
+        };
+        let mut bytes = Vec::new();
+        write_ply(&mut bytes, &posed, Some(labels), false)
+            .map_err(|e| JsError::new(&format!("PLY export: {e}")))?;
+        Ok(Uint8Array::from(bytes.as_slice()))
+    }
 }
 
 impl Model {
@@ -368,4 +529,95 @@ impl Model {
             .map(|(p, t)| *t * self.inv_poses[src][p])
             .collect())
     }
+}
+
+// ------------------------------------------------------------------ progress
+
+/// Forwards the core's progress to a JS callback at most ~20 times a second (plus
+/// every stage change and the last iteration), keeping the newest snapshot for the
+/// next message sent.
+struct Throttle<'a> {
+    callback: &'a Function,
+    last_sent: f64,
+    last_stage: Option<Stage>,
+    pending: Option<crate::pipeline::Snapshot>,
+}
+
+const MIN_INTERVAL_MS: f64 = 50.0;
+
+impl<'a> Throttle<'a> {
+    fn new(callback: &'a Function) -> Self {
+        Throttle {
+            callback,
+            last_sent: f64::NEG_INFINITY,
+            last_stage: None,
+            pending: None,
+        }
+    }
+
+    fn report(&mut self, p: &Progress) -> Control {
+        let now = js_sys::Date::now();
+        let stage_changed = self.last_stage != Some(p.stage);
+        let last = p.total > 0 && p.iter + 1 >= p.total;
+        if let Some(s) = &p.snapshot {
+            self.pending = Some(s.clone());
+        }
+        if !(stage_changed || last || now - self.last_sent >= MIN_INTERVAL_MS) {
+            return Control::Continue;
+        }
+        self.last_sent = now;
+        self.last_stage = Some(p.stage);
+        let snap = self.pending.take();
+        let msg = progress_js(p, snap.as_ref());
+        // A throwing callback must not abort the fit: log and go on.
+        if let Err(e) = self.callback.call1(&JsValue::NULL, &msg) {
+            web_sys::console::error_2(&JsValue::from_str("progress callback failed"), &e);
+        }
+        Control::Continue
+    }
+}
+
+fn stage_name(s: Stage) -> &'static str {
+    match s {
+        Stage::Load => "load",
+        Stage::Init => "init",
+        Stage::Gaussians => "gaussians",
+        Stage::Select => "select",
+        Stage::Tree => "tree",
+        Stage::Joints => "joints",
+        Stage::Done => "done",
+    }
+}
+
+/// `{stage, m, iter, total, losses: {name: value}, snapshot?: {frame, centers,
+/// rotations, scales, labels}}` with fresh typed arrays the worker can transfer.
+fn progress_js(p: &Progress, snap: Option<&crate::pipeline::Snapshot>) -> Object {
+    let o = Object::new();
+    set(&o, "stage", &JsValue::from_str(stage_name(p.stage)));
+    set(
+        &o,
+        "m",
+        &p.m.map_or(JsValue::NULL, |m| JsValue::from_f64(m as f64)),
+    );
+    set(&o, "iter", &JsValue::from_f64(p.iter as f64));
+    set(&o, "total", &JsValue::from_f64(p.total as f64));
+    let losses = Object::new();
+    for (name, v) in &p.losses {
+        set(&losses, name, &JsValue::from_f64(*v));
+    }
+    set(&o, "losses", &losses);
+    if let Some(s) = snap {
+        let so = Object::new();
+        set(&so, "frame", &JsValue::from_f64(s.frame as f64));
+        set(&so, "centers", &Float32Array::from(s.centers.as_slice()));
+        set(
+            &so,
+            "rotations",
+            &Float32Array::from(s.rotations.as_slice()),
+        );
+        set(&so, "scales", &Float32Array::from(s.scales.as_slice()));
+        set(&so, "labels", &Uint32Array::from(s.labels.as_slice()));
+        set(&o, "snapshot", &so);
+    }
+    o
 }

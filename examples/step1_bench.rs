@@ -1,0 +1,261 @@
+//! Step-1 measurement on bench-dev sequences: mean Rand index of the Step-1 labels,
+//! reconstruction and flow error of the Step-1 part poses (SPEC §5, canonical frame
+//! 0), ms per iteration and wall time.
+//!
+//! Usage: `cargo run --release --example step1_bench -- DIR... [--quality fast|balanced|paper]
+//! [--iters N] [--m M | --parts LO-HI] [--occlusion auto|on|off] [--seed S] [--no-emd] ...`
+
+use std::path::Path;
+
+use glam::{DVec3, Vec3};
+use gsart::fit::fitter::{FitConfig, Weights};
+use gsart::fit::select;
+use gsart::io::gt::GroundTruth;
+use gsart::io::sequence::{Frame, Sequence};
+use gsart::pipeline::{Control, FitOptions, Occlusion, Quality};
+
+/// Fixed bench-dev binary layout (header, then 3×f32 LE + i32 LE per vertex).
+fn read_bench_ply(path: &Path) -> (Vec<Vec3>, Vec<u32>) {
+    let bytes = std::fs::read(path).expect("read ply");
+    let hdr_end = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .expect("header")
+        + 11;
+    let header = std::str::from_utf8(&bytes[..hdr_end]).expect("utf8");
+    let n: usize = header
+        .lines()
+        .find_map(|l| {
+            l.strip_prefix("element vertex ")
+                .map(|v| v.trim().parse().expect("count"))
+        })
+        .expect("vertex count");
+    let body = &bytes[hdr_end..];
+    let f = |o: usize| f32::from_le_bytes([body[o], body[o + 1], body[o + 2], body[o + 3]]);
+    let mut pts = Vec::with_capacity(n);
+    let mut lab = Vec::with_capacity(n);
+    for i in 0..n {
+        let o = i * 16;
+        pts.push(Vec3::new(f(o), f(o + 4), f(o + 8)));
+        lab.push(
+            i32::from_le_bytes([body[o + 12], body[o + 13], body[o + 14], body[o + 15]]) as u32,
+        );
+    }
+    (pts, lab)
+}
+
+pub fn load(dir: &Path) -> (Sequence, GroundTruth) {
+    let gt_text = std::fs::read_to_string(dir.join("gt.json")).expect("gt.json");
+    let gt = GroundTruth::from_json(&gt_text, "gt.json").expect("gt");
+    let frames = gt
+        .frames
+        .iter()
+        .map(|name| {
+            let (points, labels) = read_bench_ply(&dir.join(name));
+            Frame {
+                name: name.clone(),
+                points,
+                labels: Some(labels),
+            }
+        })
+        .collect();
+    (Sequence { frames }, gt)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut dirs = Vec::new();
+    let mut opts = FitOptions::default();
+    let mut fixed_m: Option<usize> = None;
+    let mut weights = Weights::default();
+    let mut lr: Option<f64> = None;
+    let mut batch: Option<usize> = None;
+    let mut emd_n: Option<usize> = None;
+    let mut refresh: Option<usize> = None;
+    let mut i = 0;
+    while i < args.len() {
+        let a = args[i].as_str();
+        let mut val = || {
+            i += 1;
+            args[i].clone()
+        };
+        match a {
+            "--quality" => {
+                opts.quality = match val().as_str() {
+                    "fast" => Quality::Fast,
+                    "paper" => Quality::Paper,
+                    _ => Quality::Balanced,
+                }
+            }
+            "--iters" => opts.iters = Some(val().parse().expect("iters")),
+            "--m" => fixed_m = Some(val().parse().expect("m")),
+            "--parts" => {
+                let v = val();
+                let (a, b) = v.split_once('-').expect("LO-HI");
+                opts.parts = Some((a.parse().expect("lo"), b.parse().expect("hi")));
+            }
+            "--occlusion" => {
+                opts.occlusion = match val().as_str() {
+                    "on" => Occlusion::On,
+                    "off" => Occlusion::Off,
+                    _ => Occlusion::Auto,
+                }
+            }
+            "--seed" => opts.seed = val().parse().expect("seed"),
+            "--no-emd" => weights.emd = 0.0,
+            "--no-cd" => weights.cd = 0.0,
+            "--no-sep" => weights.sep = 0.0,
+            "--no-split" => weights.split = 0.0,
+            "--lr" => lr = Some(val().parse().expect("lr")),
+            "--batch" => batch = Some(val().parse().expect("batch")),
+            "--emd-n" => emd_n = Some(val().parse().expect("emd-n")),
+            "--refresh" => refresh = Some(val().parse().expect("refresh")),
+            "--flow" => weights.flow = val().parse().expect("flow"),
+            "--sep" => weights.sep = val().parse().expect("sep"),
+            _ => dirs.push(a.to_string()),
+        }
+        i += 1;
+    }
+    println!("seq,m,occl,iters,ri,recon,flow,ms_per_it,total_s,final_cd,candidates");
+    let mut sums = [0.0f64; 4];
+    for d in &dirs {
+        let (seq, gt) = load(Path::new(d));
+        let t0 = std::time::Instant::now();
+        let res = match fixed_m {
+            Some(m) => {
+                let prep = select::prepare(&seq, &opts).expect("prepare");
+                let mut cfg = FitConfig::new(prep.sched.clone(), prep.occluded, opts.seed);
+                cfg.weights = weights.clone();
+                if let Some(v) = lr {
+                    cfg.sched.lr = v;
+                }
+                if let Some(v) = batch {
+                    cfg.sched.batch = v;
+                }
+                if let Some(v) = emd_n {
+                    cfg.sched.emd_n = v;
+                }
+                if let Some(v) = refresh {
+                    cfg.sched.emd_refresh = v;
+                }
+                let (params, stats) = gsart::fit::fitter::fit_candidate(
+                    &prep.data,
+                    m,
+                    &cfg,
+                    prep.flow.as_ref(),
+                    &mut |_| Control::Continue,
+                )
+                .expect("fit");
+                let fc =
+                    gsart::fit::fitter::final_chamfer(&prep.data, &params, prep.occluded, 1024);
+                let model = params.to_model();
+                let labels = prep
+                    .data
+                    .frames32
+                    .iter()
+                    .enumerate()
+                    .map(|(k, f)| model.segment(k, f))
+                    .collect();
+                gsart::fit::Step1Result {
+                    model,
+                    labels,
+                    working: prep.working.clone(),
+                    final_chamfer: fc,
+                    occlusion_used: prep.occluded,
+                    iterations: stats.iterations,
+                    m,
+                    candidates: vec![(m, fc)],
+                    timings: Default::default(),
+                }
+            }
+            None => gsart::pipeline::fit_step1(&seq, &opts, &|_| Control::Continue).expect("fit"),
+        };
+        let secs = t0.elapsed().as_secs_f64();
+        let kk = seq.frames.len();
+        // Mean RI over frames.
+        let mut ri = 0.0;
+        for k in 0..kk {
+            let gl = seq.frames[k].labels.as_ref().expect("labels");
+            let gl: Vec<u32> = res.working[k].iter().map(|&j| gl[j as usize]).collect();
+            ri += gsart::eval::rand_index::rand_index(&res.labels[k], &gl).expect("ri");
+        }
+        ri /= kk as f64;
+        // Reconstruction / flow error on canonical frame 0.
+        let pts = &seq.frames[0].points;
+        let gl0 = seq.frames[0].labels.as_ref().expect("labels");
+        let pred0 = res.model.segment(0, pts);
+        let mut recon = 0.0;
+        let mut flow = 0.0;
+        let mut prev: Option<(Vec<DVec3>, Vec<DVec3>)> = None;
+        for t in 0..kk {
+            let mut p_t = Vec::with_capacity(pts.len());
+            let mut y_t = Vec::with_capacity(pts.len());
+            let mut e = 0.0;
+            for (n, x) in pts.iter().enumerate() {
+                let x = x.as_dvec3();
+                let a = pred0[n] as usize;
+                let g = gl0[n] as usize;
+                let pm =
+                    res.model.pose(t, a) * gsart::geom::se3::rigid_inverse(&res.model.pose(0, a));
+                let gm = gt.poses[t][g] * gsart::geom::se3::rigid_inverse(&gt.poses[0][g]);
+                let p = pm.transform_point3(x);
+                let y = gm.transform_point3(x);
+                e += (p - y).length();
+                p_t.push(p);
+                y_t.push(y);
+            }
+            recon += e / pts.len() as f64;
+            if let Some((pp, yp)) = &prev {
+                let mut f = 0.0;
+                for n in 0..pts.len() {
+                    f += ((p_t[n] - pp[n]) - (y_t[n] - yp[n])).length();
+                }
+                flow += f / pts.len() as f64;
+            }
+            prev = Some((p_t, y_t));
+        }
+        recon = recon / kk as f64 * 100.0;
+        flow = flow / (kk - 1) as f64 * 100.0;
+        let iters: usize = res
+            .timings
+            .per_candidate
+            .iter()
+            .map(|c| c.2)
+            .sum::<usize>()
+            .max(res.iterations);
+        let ms_it = secs * 1000.0 / iters.max(1) as f64;
+        let name = Path::new(d)
+            .components()
+            .rev()
+            .take(2)
+            .map(|c| c.as_os_str().to_string_lossy().to_string())
+            .collect::<Vec<_>>();
+        println!(
+            "{}/{},{},{},{},{:.4},{:.3},{:.3},{:.3},{:.1},{:.5},{:?}",
+            name[1],
+            name[0],
+            res.m,
+            res.occlusion_used,
+            res.iterations,
+            ri,
+            recon,
+            flow,
+            ms_it,
+            secs,
+            res.final_chamfer,
+            res.candidates
+        );
+        sums[0] += ri;
+        sums[1] += recon;
+        sums[2] += flow;
+        sums[3] += 1.0;
+    }
+    if sums[3] > 0.0 {
+        println!(
+            "MEAN,,,,{:.4},{:.3},{:.3}",
+            sums[0] / sums[3],
+            sums[1] / sums[3],
+            sums[2] / sums[3]
+        );
+    }
+}

@@ -1,0 +1,300 @@
+//! Step-1 driver: working clouds from a sequence, the default part-count range,
+//! occlusion detection, one candidate end to end, and model selection over several
+//! m (one thread per candidate natively, sequential in wasm where the page runs one
+//! candidate per Web Worker instead).
+
+use glam::Vec3;
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+
+use super::fitter::{self, Data, FitConfig, FlowField};
+use super::flow::OtFlow;
+use super::schedule::Schedule;
+use super::{Step1Result, Timings};
+use crate::io::sequence::Sequence;
+use crate::pipeline::{Control, FitOptions, Occlusion, Progress};
+use crate::{Error, Result};
+
+/// Total points over all frames from which a sequence counts as "robot-sized"
+/// (the paper's RoboArt: 10 × 4096; Sapien: 4 × 512). Occluded robot sequences
+/// (~10 × 800 visible points) still count as robots.
+const ROBOT_TOTAL_POINTS: usize = 6000;
+
+/// Whether the paper's small-object schedule and part range apply.
+pub fn is_small(seq: &Sequence, working_size: usize) -> bool {
+    let total: usize = seq
+        .frames
+        .iter()
+        .map(|f| f.points.len().min(working_size.max(1)))
+        .sum();
+    total < ROBOT_TOTAL_POINTS
+}
+
+/// Default inclusive range of m: 10–15 for robot-sized sequences, 3–7 for small or
+/// sparse ones (see `is_small`).
+pub fn default_part_range(seq: &Sequence) -> (usize, usize) {
+    if is_small(seq, FitOptions::default().working_size) {
+        (3, 7)
+    } else {
+        (10, 15)
+    }
+}
+
+/// Working clouds: frames above `working_size` are randomly downsampled (seeded,
+/// input order kept). Returns the clouds and the kept indices per frame.
+pub fn working_clouds(
+    seq: &Sequence,
+    working_size: usize,
+    seed: u64,
+) -> (Vec<Vec<Vec3>>, Vec<Vec<u32>>) {
+    let mut rng = StdRng::seed_from_u64(seed ^ 0x5EED_0F_C10D);
+    let mut clouds = Vec::with_capacity(seq.frames.len());
+    let mut kept = Vec::with_capacity(seq.frames.len());
+    for f in &seq.frames {
+        let n = f.points.len();
+        let mut idx: Vec<u32> = (0..n as u32).collect();
+        if working_size > 0 && n > working_size {
+            for i in 0..working_size {
+                let j = rng.random_range(i..n);
+                idx.swap(i, j);
+            }
+            idx.truncate(working_size);
+            idx.sort_unstable();
+        }
+        clouds.push(idx.iter().map(|&i| f.points[i as usize]).collect());
+        kept.push(idx);
+    }
+    (clouds, kept)
+}
+
+/// Occlusion detection for `Occlusion::Auto`: whole-surface samples of one object
+/// have (nearly) equal point counts per frame, single-view visible subsets do not.
+/// Returns true when the smallest working frame has < 85 % of the largest's points.
+pub fn detect_occlusion(clouds: &[Vec<Vec3>]) -> bool {
+    let max = clouds.iter().map(|c| c.len()).max().unwrap_or(0);
+    let min = clouds.iter().map(|c| c.len()).min().unwrap_or(0);
+    max > 0 && (min as f64) < 0.85 * max as f64
+}
+
+fn validate(seq: &Sequence) -> Result<()> {
+    if seq.frames.len() < 2 {
+        return Err(Error::Sequence(format!(
+            "Step 1 needs at least 2 frames, got {}",
+            seq.frames.len()
+        )));
+    }
+    for f in &seq.frames {
+        if f.points.len() < 16 {
+            return Err(Error::input(
+                &f.name,
+                format!("only {} points (at least 16 needed)", f.points.len()),
+            ));
+        }
+        if f.points.iter().any(|p| !p.is_finite()) {
+            return Err(Error::input(&f.name, "non-finite coordinates"));
+        }
+    }
+    Ok(())
+}
+
+/// Prepared inputs shared by every candidate.
+pub struct Prepared {
+    pub data: Data,
+    pub working: Vec<Vec<u32>>,
+    pub occluded: bool,
+    pub sched: Schedule,
+    pub flow: Option<FlowField>,
+}
+
+/// Whether the (non-learned) flow loss is used. Decided by the ablation (see the
+/// report); off by default.
+pub const USE_FLOW: bool = false;
+
+pub fn prepare(seq: &Sequence, opts: &FitOptions) -> Result<Prepared> {
+    validate(seq)?;
+    let (clouds, working) = working_clouds(seq, opts.working_size, opts.seed);
+    let occluded = match opts.occlusion {
+        Occlusion::On => true,
+        Occlusion::Off => false,
+        Occlusion::Auto => detect_occlusion(&clouds),
+    };
+    let mut sched = Schedule::preset(opts.quality, is_small(seq, opts.working_size));
+    if let Some(it) = opts.iters {
+        sched = sched.with_iters(it);
+    }
+    let data = Data::new(clouds);
+    let flow = (USE_FLOW && !occluded)
+        .then(|| FlowField::compute(&data, &OtFlow::default(), 256, opts.seed));
+    Ok(Prepared {
+        data,
+        working,
+        occluded,
+        sched,
+        flow,
+    })
+}
+
+/// Runs one candidate m on prepared data.
+pub fn run_candidate(
+    prep: &Prepared,
+    m: usize,
+    opts: &FitOptions,
+    cb: &mut dyn FnMut(&Progress) -> Control,
+) -> Result<Step1Result> {
+    let cfg = FitConfig::new(prep.sched.clone(), prep.occluded, opts.seed);
+    #[cfg(not(target_arch = "wasm32"))]
+    let t0 = std::time::Instant::now();
+    let (params, stats) = fitter::fit_candidate(&prep.data, m, &cfg, prep.flow.as_ref(), cb)?;
+    let final_chamfer = fitter::final_chamfer(&prep.data, &params, prep.occluded, 1024);
+    let model = params.to_model();
+    let labels = prep
+        .data
+        .frames32
+        .iter()
+        .enumerate()
+        .map(|(k, f)| model.segment(k, f))
+        .collect();
+    #[cfg(not(target_arch = "wasm32"))]
+    let secs = t0.elapsed().as_secs_f64();
+    #[cfg(target_arch = "wasm32")]
+    let secs = 0.0;
+    Ok(Step1Result {
+        model,
+        labels,
+        working: prep.working.clone(),
+        final_chamfer,
+        occlusion_used: prep.occluded,
+        iterations: stats.iterations,
+        m,
+        candidates: vec![(m, final_chamfer)],
+        timings: Timings {
+            total_s: secs,
+            per_candidate: vec![(m, secs, stats.iterations)],
+        },
+    })
+}
+
+/// Candidate list from the options (or the data).
+pub fn candidates(seq: &Sequence, opts: &FitOptions) -> Result<Vec<usize>> {
+    let (lo, hi) = opts.parts.unwrap_or_else(|| default_part_range(seq));
+    if lo == 0 || lo > hi {
+        return Err(Error::InvalidArgument(format!(
+            "part range {lo}..={hi} is empty or starts at 0"
+        )));
+    }
+    Ok((lo..=hi).collect())
+}
+
+/// Model selection: every candidate m, keeping the lowest final Chamfer (ties: smaller m).
+pub fn select(
+    seq: &Sequence,
+    opts: &FitOptions,
+    cb: &(dyn Fn(&Progress) -> Control + Sync),
+) -> Result<Step1Result> {
+    #[cfg(not(target_arch = "wasm32"))]
+    let t0 = std::time::Instant::now();
+    let ms = candidates(seq, opts)?;
+    let prep = prepare(seq, opts)?;
+    let results = run_all(&prep, &ms, opts, cb);
+    let mut best: Option<Step1Result> = None;
+    let mut cands = Vec::new();
+    let mut per = Vec::new();
+    for r in results {
+        let r = r?;
+        cands.push((r.m, r.final_chamfer));
+        per.extend(r.timings.per_candidate.iter().copied());
+        let better = match &best {
+            None => true,
+            Some(b) => r.final_chamfer < b.final_chamfer,
+        };
+        if better {
+            best = Some(r);
+        }
+    }
+    let mut best = best.ok_or_else(|| Error::InvalidArgument("no candidate part count".into()))?;
+    best.candidates = cands;
+    #[cfg(not(target_arch = "wasm32"))]
+    let total = t0.elapsed().as_secs_f64();
+    #[cfg(target_arch = "wasm32")]
+    let total = 0.0;
+    best.timings = Timings {
+        total_s: total,
+        per_candidate: per,
+    };
+    Ok(best)
+}
+
+#[cfg(target_arch = "wasm32")]
+fn run_all(
+    prep: &Prepared,
+    ms: &[usize],
+    opts: &FitOptions,
+    cb: &(dyn Fn(&Progress) -> Control + Sync),
+) -> Vec<Result<Step1Result>> {
+    let mut out = Vec::new();
+    for &m in ms {
+        let r = run_candidate(prep, m, opts, &mut |p| cb(p));
+        let stop = matches!(r, Err(Error::Cancelled));
+        out.push(r);
+        if stop {
+            break;
+        }
+    }
+    out
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+fn run_all(
+    prep: &Prepared,
+    ms: &[usize],
+    opts: &FitOptions,
+    cb: &(dyn Fn(&Progress) -> Control + Sync),
+) -> Vec<Result<Step1Result>> {
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    use std::sync::Mutex;
+    let threads = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
+        .min(ms.len())
+        .max(1);
+    let next = AtomicUsize::new(0);
+    let cancelled = AtomicBool::new(false);
+    let slots: Vec<Mutex<Option<Result<Step1Result>>>> =
+        ms.iter().map(|_| Mutex::new(None)).collect();
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| loop {
+                let j = next.fetch_add(1, Ordering::SeqCst);
+                if j >= ms.len() {
+                    break;
+                }
+                let r = if cancelled.load(Ordering::SeqCst) {
+                    Err(Error::Cancelled)
+                } else {
+                    run_candidate(prep, ms[j], opts, &mut |p| {
+                        if cancelled.load(Ordering::SeqCst) {
+                            return Control::Cancel;
+                        }
+                        let c = cb(p);
+                        if c == Control::Cancel {
+                            cancelled.store(true, Ordering::SeqCst);
+                        }
+                        c
+                    })
+                };
+                if let Ok(mut g) = slots[j].lock() {
+                    *g = Some(r);
+                }
+            });
+        }
+    });
+    slots
+        .into_iter()
+        .map(|m| {
+            m.into_inner()
+                .ok()
+                .flatten()
+                .unwrap_or(Err(Error::Cancelled))
+        })
+        .collect()
+}

@@ -1,0 +1,592 @@
+//! Step 3 refinement (paper §3.3): joint axes, pivots, per-frame states and the root
+//! motion are refined through forward kinematics so that the canonical frame's
+//! segmented points, moved to every frame t, match the observed cloud Xᵗ.
+//!
+//! Loss: Σₜ L_CD(FK_t(X_c), Xᵗ) over t ≠ c, bidirectional squared Chamfer (means), on
+//! seeded subsamples. The paper adds λ·L_EMD (λ = 0.3); the crate's assignment solver
+//! (`geom::assignment`) had not landed when this was written, so the refinement uses
+//! Chamfer only and [`RefineReport::uses_emd`] says so.
+//!
+//! Gradients are analytic: the Chamfer gradient on each moved point gives every part a
+//! world wrench (Σ y×g, Σ g); a joint parameter perturbs its subtree by a twist
+//! Ad_{T_parent} ξ, so its derivative is the subtree wrench paired with ξ (pulled into
+//! the joint's frame). Root motion is parametrised per frame as Tr(u)·Rot(φ)·root₀.
+//! Adam (lr 1.5e-2 as in the paper) with a cosine decay to 10% so the last iterations
+//! settle instead of jittering at the step size. The refined model is kept only if it
+//! lowers the loss on an independent evaluation subsample (never makes the model worse).
+
+use glam::{DMat3, DMat4, DVec3, Vec3};
+use rand::{rngs::StdRng, seq::index::sample, SeedableRng};
+use serde::Serialize;
+
+use super::chain::screw_exp;
+use super::project::bfs_order;
+use crate::geom::se3::{from_row_major, to_row_major};
+use crate::io::gt::JointType;
+use crate::io::result::FitResult;
+use crate::pipeline::{Control, Progress, Stage};
+
+/// Options of the refinement.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RefineOptions {
+    pub iters: usize,
+    pub lr: f64,
+    /// Points sampled per frame (source and target).
+    pub sample: usize,
+    /// Also refine the root motion.
+    pub root: bool,
+    pub seed: u64,
+}
+
+impl Default for RefineOptions {
+    fn default() -> Self {
+        RefineOptions {
+            iters: 500,
+            lr: 1.5e-2,
+            sample: 384,
+            root: true,
+            seed: 0,
+        }
+    }
+}
+
+/// Outcome of the refinement.
+#[derive(Debug, Clone, Serialize)]
+pub struct RefineReport {
+    /// Loss on the evaluation subsample before and after.
+    pub loss_before: f64,
+    pub loss_after: f64,
+    /// Whether the refined parameters were kept.
+    pub accepted: bool,
+    pub iters: usize,
+    pub uses_emd: bool,
+}
+
+/// The chain being refined (flat parameter vector + structure).
+#[derive(Debug, Clone)]
+pub(crate) struct Model {
+    pub k: usize,
+    pub c: usize,
+    pub parts: usize,
+    pub order: Vec<usize>,
+    pub parent: Vec<i64>,
+    /// Joint index per part (None for the root).
+    pub joint_of: Vec<Option<usize>>,
+    pub types: Vec<JointType>,
+    pub root0: Vec<DMat4>,
+    pub refine_root: bool,
+}
+
+// Parameter layout: per joint j: [axis(3), pivot(3), states(k)], then per frame t:
+// [u(3), φ(3)] of the root.
+impl Model {
+    fn joint_base(&self, j: usize) -> usize {
+        j * (6 + self.k)
+    }
+    fn root_base(&self, t: usize) -> usize {
+        self.types.len() * (6 + self.k) + 6 * t
+    }
+    pub fn len(&self) -> usize {
+        self.root_base(self.k)
+    }
+    fn v3(x: &[f64], i: usize) -> DVec3 {
+        DVec3::new(x[i], x[i + 1], x[i + 2])
+    }
+    fn root_pose(&self, x: &[f64], t: usize) -> DMat4 {
+        let b = self.root_base(t);
+        let u = Self::v3(x, b);
+        let phi = Self::v3(x, b + 3);
+        DMat4::from_translation(u) * DMat4::from_mat3(rot_vec(phi)) * self.root0[t]
+    }
+    fn joint_params(&self, x: &[f64], j: usize) -> (DVec3, DVec3) {
+        let b = self.joint_base(j);
+        (Self::v3(x, b), Self::v3(x, b + 3))
+    }
+    /// Part poses at frame t.
+    pub fn poses(&self, x: &[f64], t: usize) -> Vec<DMat4> {
+        let mut out = vec![DMat4::IDENTITY; self.parts];
+        for &p in &self.order {
+            match self.joint_of[p] {
+                None => out[p] = self.root_pose(x, t),
+                Some(j) => {
+                    let (a, piv) = self.joint_params(x, j);
+                    let q = x[self.joint_base(j) + 6 + t];
+                    let axis = a.normalize_or(DVec3::Z);
+                    out[p] = out[self.parent[p] as usize] * screw_exp(self.types[j], axis, piv, q);
+                }
+            }
+        }
+        out
+    }
+}
+
+fn rot_vec(phi: DVec3) -> DMat3 {
+    let th = phi.length();
+    if th < 1e-300 {
+        DMat3::IDENTITY
+    } else {
+        DMat3::from_axis_angle(phi / th, th)
+    }
+}
+
+fn skew(v: DVec3) -> DMat3 {
+    DMat3::from_cols(
+        DVec3::new(0.0, v.z, -v.y),
+        DVec3::new(-v.z, 0.0, v.x),
+        DVec3::new(v.y, -v.x, 0.0),
+    )
+}
+
+/// SO(3) left Jacobian: exp(φ + δ) ≈ exp(J_l(φ) δ) exp(φ).
+fn left_jacobian(phi: DVec3) -> DMat3 {
+    let th = phi.length();
+    let k = skew(phi);
+    let (a, b) = if th < 1e-4 {
+        (0.5 - th * th / 24.0, 1.0 / 6.0 - th * th / 120.0)
+    } else {
+        (
+            (1.0 - th.cos()) / (th * th),
+            (th - th.sin()) / (th * th * th),
+        )
+    };
+    DMat3::IDENTITY + k * a + k * k * b
+}
+
+/// Bidirectional squared Chamfer (means) between `y` and `x`, with its gradient on `y`
+/// written into `g` (brute force: both sets are small subsamples).
+fn chamfer(y: &[Vec3], x: &[Vec3], g: &mut [Vec3], nn_x: &mut [(f32, u32)]) -> f64 {
+    if y.is_empty() || x.is_empty() {
+        g.iter_mut().for_each(|v| *v = Vec3::ZERO);
+        return 0.0;
+    }
+    nn_x.iter_mut().for_each(|v| *v = (f32::INFINITY, 0));
+    let (ny, nx) = (y.len() as f32, x.len() as f32);
+    let mut loss = 0.0f64;
+    for (i, yi) in y.iter().enumerate() {
+        let mut best = (f32::INFINITY, 0usize);
+        for (m, xm) in x.iter().enumerate() {
+            let d = yi.distance_squared(*xm);
+            if d < best.0 {
+                best = (d, m);
+            }
+            if d < nn_x[m].0 {
+                nn_x[m] = (d, i as u32);
+            }
+        }
+        loss += best.0 as f64 / ny as f64;
+        g[i] = (*yi - x[best.1]) * (2.0 / ny);
+    }
+    for (m, &(d, i)) in nn_x.iter().enumerate() {
+        loss += d as f64 / nx as f64;
+        g[i as usize] += (y[i as usize] - x[m]) * (2.0 / nx);
+    }
+    loss
+}
+
+/// Sampled data of the refinement: source points (frame c) with parts, targets per frame.
+pub(crate) struct Data {
+    pub src: Vec<DVec3>,
+    pub src_part: Vec<usize>,
+    pub targets: Vec<Vec<Vec3>>,
+}
+
+/// Loss and gradient with respect to the flat parameters.
+pub(crate) fn loss_grad(m: &Model, x: &[f64], d: &Data, grad: Option<&mut [f64]>) -> f64 {
+    let mut gbuf = vec![0.0; if grad.is_some() { m.len() } else { 0 }];
+    let mut y = vec![Vec3::ZERO; d.src.len()];
+    let mut g = vec![Vec3::ZERO; d.src.len()];
+    let mut total = 0.0;
+    for t in 0..m.k {
+        if t == m.c {
+            continue;
+        }
+        let tgt = &d.targets[t];
+        let mut nn = vec![(0.0f32, 0u32); tgt.len()];
+        let poses = m.poses(x, t);
+        for (i, (s, &p)) in d.src.iter().zip(&d.src_part).enumerate() {
+            y[i] = poses[p].transform_point3(*s).as_vec3();
+        }
+        total += chamfer(&y, tgt, &mut g, &mut nn);
+        if gbuf.is_empty() {
+            continue;
+        }
+        // Wrench per part, then per subtree (children after parents in `order`).
+        let mut tau = vec![DVec3::ZERO; m.parts];
+        let mut f = vec![DVec3::ZERO; m.parts];
+        for ((yi, gi), &p) in y.iter().zip(&g).zip(&d.src_part) {
+            let (yd, gd) = (yi.as_dvec3(), gi.as_dvec3());
+            tau[p] += yd.cross(gd);
+            f[p] += gd;
+        }
+        for &p in m.order.iter().rev() {
+            if m.parent[p] >= 0 {
+                let a = m.parent[p] as usize;
+                let (tp, fp) = (tau[p], f[p]);
+                tau[a] += tp;
+                f[a] += fp;
+            }
+        }
+        for &p in &m.order {
+            match m.joint_of[p] {
+                None => {
+                    if m.refine_root && t != m.c {
+                        let b = m.root_base(t);
+                        let u = Model::v3(x, b);
+                        let phi = Model::v3(x, b + 3);
+                        let gu = f[p];
+                        let gphi = left_jacobian(phi).transpose() * (tau[p] - u.cross(f[p]));
+                        gbuf[b..b + 3].copy_from_slice(&gu.to_array());
+                        gbuf[b + 3..b + 6].copy_from_slice(&gphi.to_array());
+                    }
+                }
+                Some(j) => {
+                    let ta = poses[m.parent[p] as usize];
+                    let ra = DMat3::from_mat4(ta);
+                    let tr = ta.w_axis.truncate();
+                    let tl = ra.transpose() * (tau[p] + f[p].cross(tr));
+                    let fl = ra.transpose() * f[p];
+                    let b = m.joint_base(j);
+                    let (a, piv) = m.joint_params(x, j);
+                    let an = a.length().max(1e-12);
+                    let w = a / an;
+                    let q = x[b + 6 + t];
+                    let proj = |v: DVec3| (v - w * w.dot(v)) / an;
+                    match m.types[j] {
+                        JointType::Revolute => {
+                            let r = DMat3::from_axis_angle(w, q);
+                            let gq = tl.dot(w) + fl.dot(piv.cross(w));
+                            let gp = (DMat3::IDENTITY - r).transpose() * fl;
+                            let gw = left_jacobian(w * q).transpose() * (tl + fl.cross(piv)) * q;
+                            let ga = proj(gw);
+                            for i in 0..3 {
+                                gbuf[b + i] += ga[i];
+                                gbuf[b + 3 + i] += gp[i];
+                            }
+                            gbuf[b + 6 + t] = gq;
+                        }
+                        JointType::Prismatic => {
+                            let ga = proj(fl * q);
+                            for i in 0..3 {
+                                gbuf[b + i] += ga[i];
+                            }
+                            gbuf[b + 6 + t] = fl.dot(w);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    if let Some(out) = grad {
+        out.copy_from_slice(&gbuf);
+    }
+    total
+}
+
+fn sample_points(pts: &[Vec3], n: usize, rng: &mut StdRng) -> Vec<usize> {
+    if pts.len() <= n {
+        (0..pts.len()).collect()
+    } else {
+        let mut v = sample(rng, pts.len(), n).into_vec();
+        v.sort_unstable();
+        v
+    }
+}
+
+fn build_data(result: &FitResult, points: &[Vec<Vec3>], n: usize, rng: &mut StdRng) -> Data {
+    let c = result.canonical_frame;
+    let idx = sample_points(&points[c], n, rng);
+    let src = idx.iter().map(|&i| points[c][i].as_dvec3()).collect();
+    let src_part = idx.iter().map(|&i| result.labels[c][i] as usize).collect();
+    let targets = points
+        .iter()
+        .map(|f| sample_points(f, n, rng).into_iter().map(|i| f[i]).collect())
+        .collect();
+    Data {
+        src,
+        src_part,
+        targets,
+    }
+}
+
+/// Model and initial parameters from a projected result.
+pub(crate) fn model_from_result(
+    result: &FitResult,
+    refine_root: bool,
+) -> crate::Result<(Model, Vec<f64>)> {
+    let bad = |s: &str| crate::Error::InvalidArgument(format!("refinement: {s}"));
+    let tree = result.tree.as_ref().ok_or_else(|| bad("no tree"))?;
+    let joints = result.joints.as_ref().ok_or_else(|| bad("no joints"))?;
+    let root_motion = result
+        .root_motion
+        .as_ref()
+        .ok_or_else(|| bad("no root motion"))?;
+    let (k, n) = (result.frames, result.parts);
+    if tree.parent.len() != n || root_motion.len() != k || result.canonical_frame >= k {
+        return Err(bad("inconsistent result"));
+    }
+    let mut joint_of = vec![None; n];
+    for (j, jt) in joints.iter().enumerate() {
+        if jt.child >= n || jt.state.len() != k || tree.parent[jt.child] != jt.parent as i64 {
+            return Err(bad("joint does not match the tree"));
+        }
+        joint_of[jt.child] = Some(j);
+    }
+    let order = bfs_order(&tree.parent);
+    if order.len() != n || (0..n).any(|p| (p == tree.root) == joint_of[p].is_some()) {
+        return Err(bad("every non-root part needs exactly one joint"));
+    }
+    let m = Model {
+        k,
+        c: result.canonical_frame,
+        parts: n,
+        order,
+        parent: tree.parent.clone(),
+        joint_of,
+        types: joints.iter().map(|j| j.joint_type).collect(),
+        root0: root_motion.iter().map(from_row_major).collect(),
+        refine_root,
+    };
+    let mut x = vec![0.0; m.len()];
+    for (j, jt) in joints.iter().enumerate() {
+        let b = m.joint_base(j);
+        x[b..b + 3].copy_from_slice(&jt.axis);
+        x[b + 3..b + 6].copy_from_slice(&jt.pivot);
+        x[b + 6..b + 6 + k].copy_from_slice(&jt.state);
+    }
+    Ok((m, x))
+}
+
+/// Refine `result` (a projected chain) in place against the observed working points
+/// `points[k]` (the same clouds whose labels are `result.labels`).
+pub fn refine(
+    result: &mut FitResult,
+    points: &[Vec<Vec3>],
+    opts: &RefineOptions,
+    limit_pad: f64,
+    progress: &mut dyn FnMut(&Progress) -> Control,
+) -> crate::Result<RefineReport> {
+    let (m, x0) = model_from_result(result, opts.root)?;
+    if points.len() != m.k
+        || points
+            .iter()
+            .zip(&result.labels)
+            .any(|(p, l)| p.len() != l.len())
+    {
+        return Err(crate::Error::InvalidArgument(
+            "refinement: points do not match the result's labels".into(),
+        ));
+    }
+    let mut rng = StdRng::seed_from_u64(opts.seed);
+    let train = build_data(result, points, opts.sample, &mut rng);
+    let eval = build_data(result, points, opts.sample, &mut rng);
+    let loss_before = loss_grad(&m, &x0, &eval, None);
+
+    let mut x = x0.clone();
+    let (mut mo, mut ve) = (vec![0.0; x.len()], vec![0.0; x.len()]);
+    let mut g = vec![0.0; x.len()];
+    let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-8);
+    for it in 0..opts.iters {
+        let loss = loss_grad(&m, &x, &train, Some(&mut g));
+        let lr = opts.lr
+            * (0.1
+                + 0.9 * 0.5 * (1.0 + (std::f64::consts::PI * it as f64 / opts.iters as f64).cos()));
+        let (c1, c2) = (1.0 - b1.powi(it as i32 + 1), 1.0 - b2.powi(it as i32 + 1));
+        for i in 0..x.len() {
+            mo[i] = b1 * mo[i] + (1.0 - b1) * g[i];
+            ve[i] = b2 * ve[i] + (1.0 - b2) * g[i] * g[i];
+            x[i] -= lr * (mo[i] / c1) / ((ve[i] / c2).sqrt() + eps);
+        }
+        if it % 25 == 0 || it + 1 == opts.iters {
+            let p = Progress {
+                stage: Stage::Joints,
+                m: None,
+                iter: it,
+                total: opts.iters,
+                losses: vec![("chamfer".to_string(), loss)],
+                snapshot: None,
+            };
+            if progress(&p) == Control::Cancel {
+                return Err(crate::Error::Cancelled);
+            }
+        }
+    }
+    let loss_after = loss_grad(&m, &x, &eval, None);
+    let accepted = loss_after.is_finite() && loss_after < loss_before;
+    if accepted {
+        write_back(result, &m, &x, limit_pad);
+    }
+    Ok(RefineReport {
+        loss_before,
+        loss_after,
+        accepted,
+        iters: opts.iters,
+        uses_emd: false,
+    })
+}
+
+fn write_back(result: &mut FitResult, m: &Model, x: &[f64], limit_pad: f64) {
+    let k = m.k;
+    if let Some(joints) = result.joints.as_mut() {
+        for (j, jt) in joints.iter_mut().enumerate() {
+            let b = m.joint_base(j);
+            let (a, piv) = m.joint_params(x, j);
+            let axis = a.normalize_or(DVec3::Z);
+            jt.axis = axis.to_array();
+            // keep the pivot where it was along the (new) axis' normal plane
+            jt.pivot = piv.to_array();
+            jt.state = x[b + 6..b + 6 + k].to_vec();
+            jt.state[m.c] = 0.0;
+            let lo = jt.state.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = jt.state.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let pad = (hi - lo) * limit_pad;
+            jt.limits = [lo - pad, hi + pad];
+        }
+    }
+    let poses: Vec<Vec<DMat4>> = (0..k).map(|t| m.poses(x, t)).collect();
+    let root = m.order[0];
+    result.root_motion = Some(poses.iter().map(|f| to_row_major(&f[root])).collect());
+    result.poses = poses
+        .iter()
+        .map(|f| f.iter().map(to_row_major).collect())
+        .collect();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::result::{ResultJoint, ResultTree, FORMAT, VERSION};
+    use rand::Rng;
+
+    fn toy() -> (FitResult, Vec<Vec<Vec3>>) {
+        let k = 3;
+        let mut rng = StdRng::seed_from_u64(5);
+        let n = 60;
+        let pts: Vec<Vec3> = (0..n)
+            .map(|_| Vec3::new(rng.random(), rng.random(), rng.random()) - 0.5)
+            .collect();
+        let labels: Vec<u32> = (0..n).map(|i| (i % 3) as u32).collect();
+        let joints = vec![
+            ResultJoint {
+                child: 1,
+                parent: 0,
+                joint_type: JointType::Revolute,
+                axis: [0.2, 0.9, 0.3],
+                pivot: [0.1, -0.1, 0.2],
+                state: vec![0.0, 0.4, -0.3],
+                limits: [-0.3, 0.4],
+            },
+            ResultJoint {
+                child: 2,
+                parent: 1,
+                joint_type: JointType::Prismatic,
+                axis: [0.8, 0.1, -0.2],
+                pivot: [0.0; 3],
+                state: vec![0.0, 0.1, 0.2],
+                limits: [0.0, 0.2],
+            },
+        ];
+        let root_motion = (0..k)
+            .map(|t| {
+                to_row_major(&DMat4::from_rotation_translation(
+                    glam::DQuat::from_rotation_y(0.1 * t as f64),
+                    DVec3::new(0.05 * t as f64, 0.0, 0.02),
+                ))
+            })
+            .collect();
+        let res = FitResult {
+            format: FORMAT.into(),
+            version: VERSION,
+            frames: k,
+            canonical_frame: 0,
+            parts: 3,
+            labels: vec![labels; k],
+            poses: vec![vec![[0.0; 16]; 3]; k],
+            gaussians: None,
+            tree: Some(ResultTree {
+                root: 0,
+                parent: vec![-1, 0, 1],
+            }),
+            joints: Some(joints),
+            root_motion: Some(root_motion),
+            points: None,
+            info: None,
+        };
+        // observed frames: the source moved by a slightly different chain + fresh noise
+        let (m, mut x) = model_from_result(&res, true).unwrap();
+        x[2] += 0.05;
+        x[7] += 0.1;
+        let frames = (0..k)
+            .map(|t| {
+                let p = m.poses(&x, t);
+                pts.iter()
+                    .zip(&res.labels[0])
+                    .map(|(s, &l)| p[l as usize].transform_point3(s.as_dvec3()).as_vec3())
+                    .collect()
+            })
+            .collect();
+        (res, frames)
+    }
+
+    #[test]
+    fn gradient_matches_finite_differences() {
+        let (res, frames) = toy();
+        let (m, mut x) = model_from_result(&res, true).unwrap();
+        // move root parameters away from 0 so the left Jacobian is exercised
+        let rb = m.root_base(1);
+        x[rb..rb + 6].copy_from_slice(&[0.01, -0.02, 0.03, 0.1, -0.2, 0.15]);
+        let mut rng = StdRng::seed_from_u64(1);
+        let d = build_data(&res, &frames, 1000, &mut rng);
+        let mut g = vec![0.0; m.len()];
+        loss_grad(&m, &x, &d, Some(&mut g));
+        let h = 1e-4;
+        let mut worst: f64 = 0.0;
+        for i in 0..m.len() {
+            let is_c_state = (0..2).any(|j| i == m.joint_base(j) + 6 + m.c);
+            let is_c_root = i >= m.root_base(m.c) && i < m.root_base(m.c) + 6;
+            let mut xp = x.clone();
+            xp[i] += h;
+            let mut xm = x.clone();
+            xm[i] -= h;
+            let fd = (loss_grad(&m, &xp, &d, None) - loss_grad(&m, &xm, &d, None)) / (2.0 * h);
+            if is_c_state || is_c_root {
+                // the canonical frame has no loss term: both must be 0
+                assert!(
+                    fd.abs() < 1e-9 && g[i] == 0.0,
+                    "param {i}: fd {fd} g {}",
+                    g[i]
+                );
+                continue;
+            }
+            let err = (fd - g[i]).abs() / (1e-3 + fd.abs().max(g[i].abs()));
+            worst = worst.max(err);
+            assert!(err < 2e-3, "param {i}: fd {fd} analytic {}", g[i]);
+        }
+        assert!(worst < 2e-3);
+    }
+
+    #[test]
+    fn refinement_lowers_the_loss_and_keeps_fk_consistent() {
+        let (mut res, frames) = toy();
+        let (m0, x0) = model_from_result(&res, true).unwrap();
+        let before: Vec<Vec<DMat4>> = (0..3).map(|t| m0.poses(&x0, t)).collect();
+        res.poses = before
+            .iter()
+            .map(|f| f.iter().map(to_row_major).collect())
+            .collect();
+        let opts = RefineOptions {
+            iters: 200,
+            sample: 60,
+            ..Default::default()
+        };
+        let rep = refine(&mut res, &frames, &opts, 0.0, &mut |_| Control::Continue).unwrap();
+        assert!(rep.accepted, "{rep:?}");
+        assert!(rep.loss_after < 0.5 * rep.loss_before, "{rep:?}");
+        let (m1, x1) = model_from_result(&res, true).unwrap();
+        for t in 0..3 {
+            let p = m1.poses(&x1, t);
+            for (a, b) in p.iter().zip(&res.poses[t]) {
+                assert!(a.abs_diff_eq(from_row_major(b), 1e-9));
+            }
+        }
+    }
+}

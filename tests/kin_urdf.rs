@@ -1,0 +1,260 @@
+//! URDF export: the exported file parses (roxmltree), and forward kinematics of the
+//! URDF (composing joint origins and joint motions from the base link) equals the
+//! crate's `Chain` FK times each link's offset, for random states. With python3 and
+//! `yourdfpy` present, the same check runs through that standard URDF parser.
+
+mod kin_common;
+
+use std::collections::HashMap;
+
+use glam::{DMat3, DMat4, DVec3};
+use gsart::geom::se3::to_row_major;
+use gsart::io::result::FitResult;
+use gsart::io::urdf::{canonical_part_points, joint_name, link_name, to_urdf};
+use gsart::kinematics::chain::Chain;
+use gsart::kinematics::{build_articulated, KinOptions};
+use gsart::pipeline::Control;
+use kin_common::{load, sequences};
+use rand::{rngs::StdRng, Rng, SeedableRng};
+
+fn parse3(s: &str) -> DVec3 {
+    let v: Vec<f64> = s.split_whitespace().map(|x| x.parse().unwrap()).collect();
+    assert_eq!(v.len(), 3, "{s}");
+    DVec3::new(v[0], v[1], v[2])
+}
+
+/// Link poses of a URDF at joint values `q` (by joint name), base link at identity.
+fn urdf_fk(text: &str, q: &HashMap<String, f64>) -> HashMap<String, DMat4> {
+    let doc = roxmltree::Document::parse(text).unwrap();
+    let robot = doc.root_element();
+    assert_eq!(robot.tag_name().name(), "robot");
+    let links: Vec<String> = robot
+        .children()
+        .filter(|n| n.has_tag_name("link"))
+        .map(|n| n.attribute("name").unwrap().to_string())
+        .collect();
+    struct J {
+        name: String,
+        ty: String,
+        parent: String,
+        child: String,
+        origin: DMat4,
+        axis: DVec3,
+    }
+    let mut joints = Vec::new();
+    for j in robot.children().filter(|n| n.has_tag_name("joint")) {
+        let get = |tag: &str| j.children().find(|n| n.has_tag_name(tag));
+        let o = get("origin").unwrap();
+        let xyz = parse3(o.attribute("xyz").unwrap());
+        let rpy = parse3(o.attribute("rpy").unwrap());
+        let r = DMat3::from_rotation_z(rpy.z)
+            * DMat3::from_rotation_y(rpy.y)
+            * DMat3::from_rotation_x(rpy.x);
+        let ty = j.attribute("type").unwrap().to_string();
+        if ty != "fixed" {
+            let l = get("limit").unwrap();
+            let lo: f64 = l.attribute("lower").unwrap().parse().unwrap();
+            let hi: f64 = l.attribute("upper").unwrap().parse().unwrap();
+            assert!(lo <= hi);
+            assert!(l.attribute("effort").is_some() && l.attribute("velocity").is_some());
+        }
+        joints.push(J {
+            name: j.attribute("name").unwrap().to_string(),
+            ty,
+            parent: get("parent")
+                .unwrap()
+                .attribute("link")
+                .unwrap()
+                .to_string(),
+            child: get("child").unwrap().attribute("link").unwrap().to_string(),
+            origin: DMat4::from_translation(xyz) * DMat4::from_mat3(r),
+            axis: get("axis")
+                .map(|a| parse3(a.attribute("xyz").unwrap()))
+                .unwrap_or(DVec3::X),
+        });
+    }
+    let children: Vec<&str> = joints.iter().map(|j| j.child.as_str()).collect();
+    let bases: Vec<&String> = links
+        .iter()
+        .filter(|l| !children.contains(&l.as_str()))
+        .collect();
+    assert_eq!(bases.len(), 1, "exactly one base link");
+    let mut pose = HashMap::from([(bases[0].clone(), DMat4::IDENTITY)]);
+    while pose.len() < links.len() {
+        let before = pose.len();
+        for j in &joints {
+            if pose.contains_key(&j.child) {
+                continue;
+            }
+            let Some(&wp) = pose.get(&j.parent) else {
+                continue;
+            };
+            let v = q.get(&j.name).copied().unwrap_or(0.0);
+            let m = match j.ty.as_str() {
+                "revolute" | "continuous" => DMat4::from_axis_angle(j.axis.normalize(), v),
+                "prismatic" => DMat4::from_translation(j.axis.normalize() * v),
+                _ => DMat4::IDENTITY,
+            };
+            pose.insert(j.child.clone(), wp * j.origin * m);
+        }
+        assert!(pose.len() > before, "URDF tree is not connected");
+    }
+    pose
+}
+
+/// Results to export: the pipeline's output on two bench-dev sequences (revolute chain
+/// and prismatic joints).
+fn results() -> Vec<(String, FitResult, Vec<Vec<glam::Vec3>>)> {
+    let mut out = Vec::new();
+    for dir in sequences() {
+        let name = dir.file_name().unwrap().to_string_lossy().into_owned();
+        if !(name.starts_with("xarm7")
+            || name.starts_with("panda_gripper")
+            || name.starts_with("laikago"))
+        {
+            continue;
+        }
+        let seq = load(&dir);
+        let opts = KinOptions {
+            refine: None,
+            ..Default::default()
+        };
+        let (res, _) = build_articulated(
+            &seq.points,
+            &seq.labels,
+            &seq.gt.poses,
+            0,
+            &opts,
+            &|| 0.0,
+            &mut |_| Control::Continue,
+        )
+        .unwrap();
+        let pts = canonical_part_points(&res, &seq.points[0]);
+        out.push((name, res, pts));
+    }
+    out
+}
+
+/// Expected pose of part p's link: Chain FK (root at identity) · Tr(link origin).
+fn expected(res: &FitResult, chain: &Chain, states: &[f64]) -> Vec<DMat4> {
+    let mut origin = vec![DVec3::ZERO; res.parts];
+    for j in res.joints.as_ref().unwrap() {
+        origin[j.child] = DVec3::from(j.pivot);
+    }
+    chain
+        .part_poses(&DMat4::IDENTITY, states)
+        .unwrap()
+        .iter()
+        .zip(&origin)
+        .map(|(m, o)| *m * DMat4::from_translation(*o))
+        .collect()
+}
+
+fn random_states(res: &FitResult, rng: &mut StdRng) -> Vec<f64> {
+    let mut q = vec![0.0; res.parts];
+    for j in res.joints.as_ref().unwrap() {
+        let (lo, hi) = (j.limits[0] - 0.5, j.limits[1] + 0.5);
+        q[j.child] = rng.random_range(lo..hi);
+    }
+    q
+}
+
+#[test]
+fn urdf_fk_matches_chain_fk() {
+    let rs = results();
+    if rs.is_empty() {
+        eprintln!("skip: bench-dev not present");
+        return;
+    }
+    let mut rng = StdRng::seed_from_u64(7);
+    for (name, res, pts) in rs {
+        let text = to_urdf(&res, &pts, &name).unwrap();
+        let chain = Chain::from_result(&res).unwrap();
+        let mut worst: f64 = 0.0;
+        for _ in 0..10 {
+            let q = random_states(&res, &mut rng);
+            let named: HashMap<String, f64> =
+                (0..res.parts).map(|p| (joint_name(p), q[p])).collect();
+            let got = urdf_fk(&text, &named);
+            let root = res.tree.as_ref().unwrap().root;
+            for (p, e) in expected(&res, &chain, &q).iter().enumerate() {
+                // the URDF base link sits at the root's link origin
+                let base = expected(&res, &chain, &q)[root];
+                let g = base * got[&link_name(p)];
+                worst = worst.max(
+                    (g - *e)
+                        .to_cols_array()
+                        .iter()
+                        .fold(0.0f64, |a, b| a.max(b.abs())),
+                );
+            }
+        }
+        eprintln!("{name}: max |URDF FK − Chain FK| = {worst:.2e}");
+        assert!(worst < 1e-6, "{name}: {worst}");
+    }
+}
+
+#[test]
+fn urdf_loads_in_yourdfpy_with_matching_fk() {
+    let ok = std::process::Command::new("python3")
+        .args(["-c", "import yourdfpy"])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    if !ok {
+        eprintln!("skip: python3 with yourdfpy not available (pip install yourdfpy)");
+        return;
+    }
+    let rs = results();
+    if rs.is_empty() {
+        eprintln!("skip: bench-dev not present");
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("gsart_kin_urdf_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut rng = StdRng::seed_from_u64(9);
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/urdf_check.py");
+    for (name, res, pts) in rs {
+        let text = to_urdf(&res, &pts, &name).unwrap();
+        let urdf = dir.join(format!("{name}.urdf"));
+        std::fs::write(&urdf, &text).unwrap();
+        let q = random_states(&res, &mut rng);
+        let named: HashMap<String, f64> = res
+            .joints
+            .as_ref()
+            .unwrap()
+            .iter()
+            .map(|j| (joint_name(j.child), q[j.child]))
+            .collect();
+        let sfile = dir.join(format!("{name}.json"));
+        std::fs::write(&sfile, serde_json::to_string(&named).unwrap()).unwrap();
+        let out = std::process::Command::new("python3")
+            .arg(script)
+            .arg(&urdf)
+            .arg(&sfile)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let poses: HashMap<String, Vec<f64>> = serde_json::from_slice(&out.stdout).unwrap();
+        let chain = Chain::from_result(&res).unwrap();
+        let exp = expected(&res, &chain, &q);
+        let root = res.tree.as_ref().unwrap().root;
+        let mut worst: f64 = 0.0;
+        for (p, e) in exp.iter().enumerate() {
+            let g = &poses[&link_name(p)];
+            let m = to_row_major(&(exp[root].inverse() * *e));
+            worst = worst.max(
+                m.iter()
+                    .zip(g)
+                    .fold(0.0f64, |a, (x, y)| a.max((x - y).abs())),
+            );
+        }
+        eprintln!("{name}: yourdfpy max |URDF FK − Chain FK| = {worst:.2e}");
+        assert!(worst < 1e-6, "{name}: {worst}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
