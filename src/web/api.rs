@@ -4,12 +4,13 @@
 //! Only conversions live here; every decision is made by the core.
 
 use glam::{DMat3, DMat4, DVec3, Vec3};
-use js_sys::{
-    Array, Float32Array, Float64Array, Function, Object, Reflect, Uint32Array, Uint8Array,
-};
+use js_sys::{Array, Float32Array, Function, Object, Reflect, Uint32Array, Uint8Array};
 use serde::Serialize;
+use std::cell::RefCell;
+
 use wasm_bindgen::prelude::*;
 
+use crate::fit::Step1Result;
 use crate::geom::se3::{from_row_major, rigid_inverse};
 use crate::io::gt::JointType;
 use crate::io::ply::write_ply;
@@ -17,7 +18,6 @@ use crate::io::result::FitResult;
 use crate::io::sequence::{natural_cmp, Frame, LoadOptions, Sequence};
 use crate::kinematics::chain::Chain;
 use crate::pipeline::{Control, FitOptions, Progress, Stage};
-use crate::synth::{self, ObjectKind, SynthOptions};
 
 /// Installs the panic hook so a bug shows a readable message in the console.
 #[wasm_bindgen(start)]
@@ -150,46 +150,71 @@ pub fn natural_order(names: Vec<String>) -> Vec<u32> {
     idx
 }
 
-/// Names of the built-in examples, in menu order.
-#[wasm_bindgen]
-pub fn example_names() -> Vec<String> {
-    synth::example_names()
-        .iter()
-        .map(|s| s.to_string())
-        .collect()
+// ------------------------------------------------------------------ fitting
+
+thread_local! {
+    /// Step-1 candidates fitted by this worker, kept so the worker holding the best one
+    /// can go on with Steps 2–3 without sending the model across workers.
+    static CANDIDATES: RefCell<Vec<Step1Result>> = const { RefCell::new(Vec::new()) };
 }
 
-/// One-line description of a built-in example (for tooltips).
+/// The core's default part-count range for these frames: `[lo, hi]`.
 #[wasm_bindgen]
-pub fn example_description(name: &str) -> Result<String, JsError> {
-    let kind: ObjectKind = name.parse().map_err(js_err)?;
-    Ok(kind.describe().to_string())
+pub fn default_part_range(frames: Array, names: Array) -> Result<Vec<u32>, JsError> {
+    let seq = sequence_from_js(&frames, &names)?;
+    let (lo, hi) = crate::pipeline::default_part_range(&seq);
+    Ok(vec![lo as u32, hi as u32])
 }
 
-/// Generates a built-in example: `{name, frames: [{name, points, labels}], gt: string,
-/// heldout: [{name, points, labels}]}` (the ground truth as `gt.json` text).
+/// The working clouds the fit sees (frames above the working size downsampled, as
+/// the core does it), so snapshot labels can be drawn on their points.
 #[wasm_bindgen]
-pub fn generate_example(name: &str, seed: u64) -> Result<JsValue, JsError> {
-    let kind: ObjectKind = name.parse().map_err(js_err)?;
-    let opts = SynthOptions {
-        seed,
-        ..SynthOptions::new(kind)
-    };
-    let out = synth::generate(&opts).map_err(js_err)?;
+pub fn working_clouds(frames: Array, names: Array, options: JsValue) -> Result<Array, JsError> {
+    let seq = sequence_from_js(&frames, &names)?;
+    let opts = options_from_js(options)?;
+    let (clouds, _) = crate::fit::select::working_clouds(&seq, opts.working_size, opts.seed);
+    let out = Array::new();
+    for c in &clouds {
+        out.push(&flat_points(c));
+    }
+    Ok(out)
+}
+
+/// Step 1 for one candidate part count `m`, reporting progress to `on_progress`
+/// (≤ ~20 calls/s). Keeps the candidate in this worker and returns
+/// `{m, loss, iterations, occlusion_used}` (`loss`: the model-selection Chamfer).
+#[wasm_bindgen]
+pub fn fit_candidate(
+    frames: Array,
+    names: Array,
+    m: usize,
+    options: JsValue,
+    on_progress: &Function,
+) -> Result<JsValue, JsError> {
+    let seq = sequence_from_js(&frames, &names)?;
+    let opts = options_from_js(options)?;
+    let mut throttle = Throttle::new(on_progress);
+    let r = crate::pipeline::fit_step1_single(&seq, m, &opts, &mut |p| throttle.report(p))
+        .map_err(js_err)?;
     let o = Object::new();
-    set(&o, "name", &JsValue::from_str(kind.name()));
-    let frames = Array::new();
-    for f in &out.sequence.frames {
-        frames.push(&frame_js(f));
-    }
-    set(&o, "frames", &frames);
-    let heldout = Array::new();
-    for f in &out.heldout {
-        heldout.push(&frame_js(f));
-    }
-    set(&o, "heldout", &heldout);
-    set(&o, "gt", &JsValue::from_str(&synth::gt_json(&out)));
+    set(&o, "m", &JsValue::from_f64(m as f64));
+    set(&o, "loss", &JsValue::from_f64(r.final_chamfer));
+    set(&o, "iterations", &JsValue::from_f64(r.iterations as f64));
+    set(&o, "occlusion_used", &JsValue::from_bool(r.occlusion_used));
+    CANDIDATES.with(|c| c.borrow_mut().push(r));
     Ok(o.into())
+}
+
+/// The candidate the core's rule selects among `(m, loss)` pairs (lowest final
+/// Chamfer, ties to the smaller m), so the page knows which worker goes on.
+#[wasm_bindgen]
+pub fn best_candidate(ms: Vec<u32>, losses: Vec<f64>) -> Result<u32, JsError> {
+    ms.iter()
+        .zip(&losses)
+        .filter(|(_, l)| l.is_finite())
+        .min_by(|a, b| a.1.total_cmp(b.1).then(a.0.cmp(b.0)))
+        .map(|(&m, _)| m)
+        .ok_or_else(|| JsError::new("no candidate finished with a finite loss"))
 }
 
 // ------------------------------------------------------------------ the model
