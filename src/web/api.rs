@@ -57,7 +57,7 @@ fn flat_points(points: &[Vec3]) -> Float32Array {
 }
 
 fn points_from_flat(flat: &[f32], name: &str) -> Result<Vec<Vec3>, JsError> {
-    if flat.len() % 3 != 0 {
+    if !flat.len().is_multiple_of(3) {
         return Err(js_err(crate::Error::input(
             name,
             format!("{} coordinates is not a multiple of 3", flat.len()),
