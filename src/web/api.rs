@@ -12,7 +12,7 @@ use wasm_bindgen::prelude::*;
 
 use crate::fit::Step1Result;
 use crate::geom::se3::{from_row_major, rigid_inverse};
-use crate::io::gt::JointType;
+use crate::io::gt::{GroundTruth, JointType};
 use crate::io::ply::write_ply;
 use crate::io::result::FitResult;
 use crate::io::sequence::{natural_cmp, Frame, LoadOptions, Sequence};
@@ -215,6 +215,42 @@ pub fn best_candidate(ms: Vec<u32>, losses: Vec<f64>) -> Result<u32, JsError> {
         .min_by(|a, b| a.1.total_cmp(b.1).then(a.0.cmp(b.0)))
         .map(|(&m, _)| m)
         .ok_or_else(|| JsError::new("no candidate finished with a finite loss"))
+}
+
+/// Metrics of a result against ground truth (SPEC §5): `gt` is `gt.json` text,
+/// `frames`/`labels` the observed points and their ground-truth part labels per frame
+/// (the order of the result's labels). Returns `{mean_ri, canonical_ri,
+/// reconstruction_error, flow_error, tree_edit_distance, reanimation_error, notes}`.
+#[wasm_bindgen]
+pub fn evaluate(
+    result_json: &str,
+    frames: Array,
+    labels: Array,
+    gt_json: &str,
+) -> Result<JsValue, JsError> {
+    let result = FitResult::from_json(result_json, "result").map_err(js_err)?;
+    let gt = GroundTruth::from_json(gt_json, "gt.json").map_err(js_err)?;
+    let mut frame_labels = Vec::with_capacity(labels.length() as usize);
+    for (k, l) in labels.iter().enumerate() {
+        let l: Uint32Array = l.dyn_into().map_err(|_| {
+            JsError::new(&format!(
+                "frame {k} has no ground-truth part labels: no metrics"
+            ))
+        })?;
+        frame_labels.push(l.to_vec());
+    }
+    let c = result.canonical_frame;
+    let flat: Float32Array = frames
+        .get(c as u32)
+        .dyn_into()
+        .map_err(|_| JsError::new(&format!("the canonical frame {c} is missing")))?;
+    let points = points_from_flat(&flat.to_vec(), "canonical frame")?;
+    let canonical_labels = frame_labels
+        .get(c)
+        .ok_or_else(|| JsError::new(&format!("the canonical frame {c} has no labels")))?;
+    let metrics = crate::eval::evaluate(&result, &gt, &points, canonical_labels, &frame_labels)
+        .map_err(js_err)?;
+    to_js(&metrics)
 }
 
 // ------------------------------------------------------------------ the model
@@ -443,6 +479,17 @@ impl Model {
             map.insert(POINTS_KEY.to_string(), serde_json::json!(flat));
         }
         serde_json::to_string(&value).map_err(|e| JsError::new(&format!("internal: {e}")))
+    }
+
+    /// URDF of the model: one link per part (a box around its canonical points),
+    /// joints with axis, origin and limits.
+    pub fn urdf(&self, name: &str) -> Result<String, JsError> {
+        let (points, src) = self.source(self.result.canonical_frame)?;
+        if src != self.result.canonical_frame {
+            return Err(JsError::new("internal: canonical points missing"));
+        }
+        let parts = crate::io::urdf::canonical_part_points(&self.result, points);
+        crate::io::urdf::to_urdf(&self.result, &parts, name).map_err(js_err)
     }
 
     /// Frame k as a binary PLY with `x y z part` (the input points when loaded, else the

@@ -65,13 +65,7 @@ function fmtTime(s) {
 }
 
 function partColor(p) {
-  const pal = S.palette;
-  if (pal && pal.length >= 3) {
-    const n = pal.length / 3;
-    const i = (p % n) * 3;
-    return `rgb(${pal[i]}, ${pal[i + 1]}, ${pal[i + 2]})`;
-  }
-  return `hsl(${(p * 137.508) % 360} 70% 60%)`;
+  try { return wasm.palette_css(p); } catch { return `hsl(${(p * 137.508) % 360} 70% 60%)`; }
 }
 
 function goodFrames() { return S.frames.filter((f) => f.points && !f.error); }
@@ -116,7 +110,6 @@ async function startView() {
   badge.className = `badge ${b}`;
   badge.title = b === 'webgpu' ? 'Drawing with WebGPU' : 'Drawing with WebGL2 (this browser has no usable WebGPU)';
   document.body.dataset.backend = b;
-  try { S.palette = wasm.part_palette?.(64) ?? null; } catch { S.palette = null; }
   S.view.onCamera = (state) => writeHash(state);
   S.view.setGaussiansVisible(S.gaussiansOn);
 }
@@ -204,18 +197,6 @@ async function loadSequence({ name, files, gt = null, heldout = [], example = nu
     return;
   }
   if (token !== S.loadToken) return;
-  if (heldout.length && gt) {
-    const hb = await Promise.all(heldout.map((f) => f.file.arrayBuffer()));
-    const parsed = [];
-    const hj = new WorkerJob({ type: 'parse', files: heldout.map((f, i) => ({ name: f.name, bytes: hb[i] })) }, hb,
-      (msg) => { if (msg.type === 'parsed' && !msg.error) parsed.push(msg); });
-    try { await hj.promise; } catch { /* metrics will say held-out poses are missing */ }
-    if (token !== S.loadToken) return;
-    let ho = parsed.map((p) => p.name);
-    try { ho = Array.from(wasm.natural_order(ho)).map((i) => parsed[i].name); } catch { /* keep */ }
-    const byName = new Map(parsed.map((p) => [p.name, p]));
-    S.heldout = { names: ho, frames: ho.map((n) => byName.get(n).points) };
-  }
   afterLoad(note);
 }
 
@@ -550,7 +531,7 @@ async function startFit() {
   try { ({ opts, range } = readOptions()); } catch (e) { toast(errText(e), 'error'); return; }
   stopPlay();
   resetResult();
-  const gtOk = S.gt && good.length === S.frames.length;
+  const gtOk = S.gt && good.length === S.frames.length && good.every((f) => f.labels);
   buildStages(!!gtOk);
   $('progress').hidden = false;
   S.chart.clear('Step 1 loss');
@@ -583,7 +564,8 @@ async function startFit() {
     options: opts,
     range,
     gt: gtOk ? S.gt : null,
-    heldout: gtOk ? S.heldout : null,
+    labels: gtOk ? good.map((f) => f.labels) : null,
+    bestOf: (ms, losses) => wasm.best_candidate(Uint32Array.from(ms), Float64Array.from(losses)),
     callbacks: {
       onCandidateStart: (m) => {
         cands.set(m, { iter: 0, total: totalGuess, done: false });
@@ -644,7 +626,7 @@ async function startFit() {
   fitUi(false);
   for (const st of STAGES) if (S.stageEls[st.key]) setStage(st.key, 1);
   const secs = (performance.now() - t0) / 1000;
-  const best = out.candidates.length ? out.candidates.reduce((a, b) => (b.loss < a.loss ? b : a)) : null;
+  const best = out.candidates.find((c) => c.m === out.best) ?? null;
   $('fit-status').innerHTML = `<span class="msg-good">Done in ${fmtTime(secs)}.</span>`
     + (out.candidates.length > 1 ? ` Tried m = ${out.candidates.map((c) => c.m).join(', ')}.` : '');
   S.metrics = out.metrics;
