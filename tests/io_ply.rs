@@ -366,3 +366,85 @@ fn benchmark_frames_read_with_labels_in_range() {
     }
     assert!(seen > 0, "bench-dev present but no frame_000.ply found");
 }
+
+/// A reader that hands out at most `step` bytes per call, like a slow pipe.
+struct Trickle<'a> {
+    data: &'a [u8],
+    step: usize,
+}
+
+impl std::io::Read for Trickle<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.step.min(buf.len()).min(self.data.len());
+        buf[..n].copy_from_slice(&self.data[..n]);
+        self.data = &self.data[n..];
+        Ok(n)
+    }
+}
+
+#[test]
+fn streaming_survives_short_reads_and_chunk_boundaries() {
+    // More records than one decode chunk (64 KiB / 16 B = 4096), lists and all formats.
+    let pts = blob(9000);
+    let labels: Vec<u32> = (0..9000).map(|i| i % 11).collect();
+    for f in FORMATS {
+        let bytes = encode(
+            f,
+            &[El {
+                name: "vertex",
+                rows: vertex_rows(&pts, Some(&labels)),
+            }],
+        );
+        for step in [1, 7, 4096, 100_000] {
+            let c = read_ply_from(Trickle { data: &bytes, step }, "t.ply").unwrap();
+            assert_eq!(c.points, pts, "{f} step {step}");
+            assert_eq!(c.labels.as_deref(), Some(&labels[..]));
+        }
+        // Truncation detected the same way through a trickle.
+        let e = read_ply_from(
+            Trickle {
+                data: &bytes[..bytes.len() - 20],
+                step: 3,
+            },
+            "t.ply",
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("truncated"), "{e}");
+    }
+    // Recognising a ZIP does not depend on how much each read returns.
+    let e = read_ply_from(
+        Trickle {
+            data: b"PK\x03\x04xxxx",
+            step: 1,
+        },
+        "z.ply",
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("z.ply: this looks like a ZIP archive"),
+        "{e}"
+    );
+}
+
+#[test]
+fn header_variants_are_accepted() {
+    // CRLF line endings, obj_info and comments, blank and indented lines.
+    let text = "ply\r\nformat ascii 1.0\r\ncomment made on windows\r\nobj_info scanner v2\r\n\r\nelement vertex 16\r\n  property float x\r\nproperty float y\r\nproperty float z\r\nend_header\r\n";
+    let mut b = text.as_bytes().to_vec();
+    for p in blob(16) {
+        b.extend_from_slice(format!("{} {} {}\r\n", p.x, p.y, p.z).as_bytes());
+    }
+    let c = read_ply(&b, "crlf.ply").unwrap();
+    assert_eq!(c.points, blob(16));
+    // Binary after a CRLF end_header.
+    let mut b = "ply\r\nformat binary_little_endian 1.0\r\nelement vertex 16\r\nproperty float x\r\nproperty float y\r\nproperty float z\r\nend_header\r\n"
+        .as_bytes()
+        .to_vec();
+    for p in blob(16) {
+        for v in [p.x, p.y, p.z] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    assert_eq!(read_ply(&b, "crlf.ply").unwrap().points, blob(16));
+}

@@ -25,6 +25,9 @@ pub const MIN_POINTS: usize = 16;
 /// a binary file without a newline from being buffered whole while looking for one.
 const MAX_HEADER_BYTES: usize = 1 << 20;
 
+/// Bytes looked at to recognise the file type.
+const SNIFF_BYTES: usize = 512;
+
 /// Records decoded per chunk on the binary fast path.
 const CHUNK_BYTES: usize = 1 << 16;
 
@@ -222,26 +225,32 @@ fn read_full<R: Read>(r: &mut R, buf: &mut [u8]) -> std::io::Result<usize> {
 
 // ---------------------------------------------------------------- header parsing
 
-fn read_header<R: BufRead>(r: &mut R, file: &str) -> Result<Header> {
-    let io_err = |e: std::io::Error| Error::io(file, e);
-    // Peek at the start first so that a ZIP/OBJ/... gets a message naming what it is.
-    let start = r.fill_buf().map_err(io_err)?;
+/// Checks the first bytes of the file (as many as [`SNIFF_BYTES`], fewer only when the
+/// file is shorter) so that a ZIP/OBJ/... gets a message naming what it is.
+fn check_magic(start: &[u8], file: &str) -> Result<()> {
     if start.is_empty() {
         return Err(input(file, "the file is empty, not a PLY file"));
     }
-    let magic_ok = start.starts_with(b"ply\n") || start.starts_with(b"ply\r");
-    if !magic_ok {
-        if let Some(what) = sniff_other_format(start) {
-            return Err(input(file, what));
-        }
-        if !(start.len() < 4 && b"ply\n".starts_with(start)) {
-            return Err(input(
-                file,
-                "not a PLY file: it does not start with the line 'ply'",
-            ));
-        }
+    if start.starts_with(b"ply\n") || start.starts_with(b"ply\r") {
+        return Ok(());
     }
+    if let Some(what) = sniff_other_format(start) {
+        return Err(input(file, what));
+    }
+    if b"ply".starts_with(start) {
+        return Err(input(
+            file,
+            "malformed header: the file ends before the 'end_header' line",
+        ));
+    }
+    Err(input(
+        file,
+        "not a PLY file: it does not start with the line 'ply'",
+    ))
+}
 
+fn read_header<R: BufRead>(r: &mut R, file: &str) -> Result<Header> {
+    let io_err = |e: std::io::Error| Error::io(file, e);
     let mut format = None;
     let mut elements: Vec<Element> = Vec::new();
     let mut line = Vec::with_capacity(128);
@@ -624,6 +633,7 @@ fn read_ascii_element<R: BufRead>(
                 ),
             )
         })?;
+        let at_eof = !line.ends_with(b"\n");
         let mut tokens = text.split_ascii_whitespace();
         let Some(first) = tokens.next() else {
             continue; // blank line
@@ -641,9 +651,14 @@ fn read_ascii_element<R: BufRead>(
             )
         };
         let next = |tokens: &mut dyn Iterator<Item = &str>| -> Result<f64> {
-            let t = tokens
-                .next()
-                .ok_or_else(|| mismatch("has too few values"))?;
+            let t = tokens.next().ok_or_else(|| {
+                // A short last line without its newline is a cut-off file.
+                if at_eof {
+                    truncated(file, el, idx)
+                } else {
+                    mismatch("has too few values")
+                }
+            })?;
             t.parse::<f64>()
                 .map_err(|_| mismatch(&format!("has a value '{t}' that is not a number")))
         };
@@ -736,7 +751,14 @@ pub fn read_ply(bytes: &[u8], file: &str) -> Result<PlyCloud> {
 
 /// Streams a PLY file from any reader (wrap files in nothing: this buffers itself).
 pub fn read_ply_from<R: Read>(reader: R, file: &str) -> Result<PlyCloud> {
-    let mut r = BufReader::with_capacity(CHUNK_BYTES, reader);
+    // Read the start whole (whatever sizes the reader hands out) to recognise other
+    // formats, then continue over it and the rest of the stream.
+    let mut reader = reader;
+    let mut start = vec![0u8; SNIFF_BYTES];
+    let got = read_full(&mut reader, &mut start).map_err(|e| Error::io(file, e))?;
+    start.truncate(got);
+    check_magic(&start, file)?;
+    let mut r = BufReader::with_capacity(CHUNK_BYTES, std::io::Cursor::new(start).chain(reader));
     let header = read_header(&mut r, file)?;
 
     let vi = header

@@ -324,7 +324,12 @@ impl Sequence {
 
     /// Loads every `*.ply` file of a folder (see [`Sequence::ply_files_in`]).
     pub fn from_dir(dir: &Path) -> Result<Sequence> {
-        Sequence::from_files(&Sequence::ply_files_in(dir)?)
+        Sequence::from_dir_with(dir, LoadOptions::default())
+    }
+
+    /// [`Sequence::from_dir`] with explicit options.
+    pub fn from_dir_with(dir: &Path, opts: LoadOptions) -> Result<Sequence> {
+        Sequence::from_files_with(&Sequence::ply_files_in(dir)?, opts)
     }
 
     /// Parses named buffers (the browser's dropped files) independently: each gets its
