@@ -181,11 +181,19 @@ pub fn finish(
         points.push(w);
     }
     let m = step1.model.m;
-    let poses: Vec<Vec<glam::DMat4>> =
-        (0..k).map(|t| (0..m).map(|i| step1.model.pose(t, i)).collect()).collect();
+    let poses: Vec<Vec<glam::DMat4>> = (0..k)
+        .map(|t| (0..m).map(|i| step1.model.pose(t, i)).collect())
+        .collect();
     let kin_opts = crate::kinematics::KinOptions::default();
-    let (mut result, kin) =
-        crate::kinematics::build_articulated(&points, &step1.labels, &poses, canonical, &kin_opts, clock, cb)?;
+    let (mut result, kin) = crate::kinematics::build_articulated(
+        &points,
+        &step1.labels,
+        &poses,
+        canonical,
+        &kin_opts,
+        clock,
+        cb,
+    )?;
 
     // Every input point gets a part: segment the full frames with the Gaussians, then
     // map Gaussians to merged parts.
@@ -194,9 +202,22 @@ pub fn finish(
         .frames
         .iter()
         .enumerate()
-        .map(|(t, f)| step1.model.segment(t, &f.points).into_iter().map(part_of).collect())
+        .map(|(t, f)| {
+            step1
+                .model
+                .segment(t, &f.points)
+                .into_iter()
+                .map(part_of)
+                .collect()
+        })
         .collect();
-    result.points = Some(seq.frames[canonical].points.iter().map(|p| p.to_array()).collect());
+    result.points = Some(
+        seq.frames[canonical]
+            .points
+            .iter()
+            .map(|p| p.to_array())
+            .collect(),
+    );
     result.gaussians = Some(
         (0..m)
             .map(|i| {
@@ -233,7 +254,11 @@ pub fn finish(
     }
     notes.push(format!(
         "occlusion handling: {}",
-        if step1.occlusion_used { "on (partial/occluded losses)" } else { "off (full-surface losses)" }
+        if step1.occlusion_used {
+            "on (partial/occluded losses)"
+        } else {
+            "off (full-surface losses)"
+        }
     ));
     notes.push(format!(
         "model selection: m = {} of {:?} (lowest final Chamfer); {} parts after merging",
@@ -265,7 +290,9 @@ pub fn select_candidate(
     let mut best = candidates
         .into_iter()
         .min_by(|a, b| a.final_chamfer.total_cmp(&b.final_chamfer))
-        .ok_or_else(|| crate::Error::InvalidArgument("no Step-1 candidate to select from".into()))?;
+        .ok_or_else(|| {
+            crate::Error::InvalidArgument("no Step-1 candidate to select from".into())
+        })?;
     best.candidates = all;
     Ok(best)
 }
@@ -281,15 +308,23 @@ pub fn evaluate(
     let mut frame_labels = Vec::with_capacity(seq.frames.len());
     for f in &seq.frames {
         let l = f.labels.clone().ok_or_else(|| {
-            crate::Error::input(&f.name, "no `part`/`label` property: the ground truth needs per-point labels")
+            crate::Error::input(
+                &f.name,
+                "no `part`/`label` property: the ground truth needs per-point labels",
+            )
         })?;
         frame_labels.push(l);
     }
-    let canonical = seq
-        .frames
-        .get(c)
-        .ok_or_else(|| crate::Error::Sequence(format!("canonical frame {c} is not in the sequence")))?;
-    crate::eval::evaluate(result, gt, &canonical.points, &frame_labels[c], &frame_labels)
+    let canonical = seq.frames.get(c).ok_or_else(|| {
+        crate::Error::Sequence(format!("canonical frame {c} is not in the sequence"))
+    })?;
+    crate::eval::evaluate(
+        result,
+        gt,
+        &canonical.points,
+        &frame_labels[c],
+        &frame_labels,
+    )
 }
 
 /// Re-articulation: the canonical frame's points re-posed by forward kinematics with
@@ -308,11 +343,18 @@ pub fn articulate(
         .ok_or_else(|| bad("the result carries no points (key `points`)".into()))?;
     let joints = result.joints.as_deref().unwrap_or(&[]);
     if states.len() != joints.len() {
-        return Err(bad(format!("{} joint states given, the model has {} joints", states.len(), joints.len())));
+        return Err(bad(format!(
+            "{} joint states given, the model has {} joints",
+            states.len(),
+            joints.len()
+        )));
     }
     let frame = frame.unwrap_or(result.canonical_frame);
     if frame >= result.frames {
-        return Err(bad(format!("frame {frame}: the result has {} frames", result.frames)));
+        return Err(bad(format!(
+            "frame {frame}: the result has {} frames",
+            result.frames
+        )));
     }
     let chain = crate::kinematics::chain::Chain::from_result(result)?;
     let mut part_states = vec![0.0; result.parts];
@@ -331,7 +373,11 @@ pub fn articulate(
         .iter()
         .zip(labels)
         .map(|(p, &l)| {
-            let x = poses[l as usize].transform_point3(glam::DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64));
+            let x = poses[l as usize].transform_point3(glam::DVec3::new(
+                p[0] as f64,
+                p[1] as f64,
+                p[2] as f64,
+            ));
             x.as_vec3()
         })
         .collect())
@@ -347,7 +393,9 @@ pub fn urdf(
     let pts = &seq
         .frames
         .get(c)
-        .ok_or_else(|| crate::Error::Sequence(format!("canonical frame {c} is not in the sequence")))?
+        .ok_or_else(|| {
+            crate::Error::Sequence(format!("canonical frame {c} is not in the sequence"))
+        })?
         .points;
     let part_points = crate::io::urdf::canonical_part_points(result, pts);
     crate::io::urdf::to_urdf(result, &part_points, name)

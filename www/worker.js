@@ -47,7 +47,7 @@ async function handle(msg) {
     case 'example': {
       const ex = gsart.generate_example(msg.name, BigInt(msg.seed ?? 0));
       const arrays = [];
-      for (const f of [...ex.frames, ...ex.heldout]) arrays.push(f.points, f.labels);
+      for (const f of ex.frames) arrays.push(f.points, f.labels);
       self.postMessage({ id, type: 'result', example: ex }, buffersOf(arrays));
       break;
     }
@@ -64,7 +64,7 @@ async function handle(msg) {
     case 'finish': {
       const t0 = performance.now();
       // Steps 2–3 on the candidate this worker fitted (the best one).
-      const result = gsart.finish(msg.frames, msg.names, msg.m, msg.options,
+      const result = gsart.finish(msg.frames, msg.names, msg.m, msg.candidates,
         (p) => postProgress(id, p));
       let metrics = null;
       let metricsError = null;

@@ -18,6 +18,7 @@ use crate::io::result::FitResult;
 use crate::io::sequence::{natural_cmp, Frame, LoadOptions, Sequence};
 use crate::kinematics::chain::Chain;
 use crate::pipeline::{Control, FitOptions, Progress, Stage};
+use crate::synth::{self, ObjectKind, SynthOptions};
 
 /// Installs the panic hook so a bug shows a readable message in the console.
 #[wasm_bindgen(start)]
@@ -205,6 +206,46 @@ pub fn fit_candidate(
     Ok(o.into())
 }
 
+/// Steps 2–3 on candidate `m` fitted by this worker (the one the page selected),
+/// with every candidate's `[m, loss]` for the result's notes. Returns the result JSON
+/// (with the canonical points, so it opens on its own).
+#[wasm_bindgen]
+pub fn finish(
+    frames: Array,
+    names: Array,
+    m: usize,
+    candidates: Array,
+    on_progress: &Function,
+) -> Result<String, JsError> {
+    let seq = sequence_from_js(&frames, &names)?;
+    let mut step1 = CANDIDATES
+        .with(|c| {
+            let mut c = c.borrow_mut();
+            let i = c.iter().position(|r| r.m == m)?;
+            Some(c.swap_remove(i))
+        })
+        .ok_or_else(|| {
+            JsError::new(&format!(
+                "internal: candidate m = {m} is not in this worker"
+            ))
+        })?;
+    let mut all = Vec::new();
+    for pair in candidates.iter() {
+        let pair = Array::from(&pair);
+        if let (Some(cm), Some(loss)) = (pair.get(0).as_f64(), pair.get(1).as_f64()) {
+            all.push((cm as usize, loss));
+        }
+    }
+    if !all.is_empty() {
+        step1.candidates = all;
+    }
+    let mut throttle = Throttle::new(on_progress);
+    let clock = || js_sys::Date::now() / 1000.0;
+    let out = crate::pipeline::finish(&seq, step1, &clock, &mut |p| throttle.report(p))
+        .map_err(js_err)?;
+    Ok(out.result.to_json())
+}
+
 /// The candidate the core's rule selects among `(m, loss)` pairs (lowest final
 /// Chamfer, ties to the smaller m), so the page knows which worker goes on.
 #[wasm_bindgen]
@@ -253,6 +294,43 @@ pub fn evaluate(
     to_js(&metrics)
 }
 
+/// Names of the built-in examples, in menu order.
+#[wasm_bindgen]
+pub fn example_names() -> Vec<String> {
+    synth::example_names()
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+}
+
+/// One-line description of a built-in example (for tooltips).
+#[wasm_bindgen]
+pub fn example_description(name: &str) -> Result<String, JsError> {
+    let kind: ObjectKind = name.parse().map_err(js_err)?;
+    Ok(kind.describe().to_string())
+}
+
+/// Generates a built-in example: `{name, frames: [{name, points, labels}], gt}`
+/// (`gt`: the ground truth as `gt.json` text, for the metrics).
+#[wasm_bindgen]
+pub fn generate_example(name: &str, seed: u64) -> Result<JsValue, JsError> {
+    let kind: ObjectKind = name.parse().map_err(js_err)?;
+    let opts = SynthOptions {
+        seed,
+        ..SynthOptions::new(kind)
+    };
+    let out = synth::generate(&opts).map_err(js_err)?;
+    let o = Object::new();
+    set(&o, "name", &JsValue::from_str(kind.name()));
+    let frames = Array::new();
+    for f in &out.sequence.frames {
+        frames.push(&frame_js(f));
+    }
+    set(&o, "frames", &frames);
+    set(&o, "gt", &JsValue::from_str(&synth::gt_json(&out)));
+    Ok(o.into())
+}
+
 // ------------------------------------------------------------------ the model
 
 /// A result opened for viewing: re-posing through the core's forward kinematics
@@ -263,39 +341,34 @@ pub struct Model {
     chain: Option<Chain>,
     /// Input points per frame when the page has them (labels[k] order).
     frame_points: Vec<Option<Vec<Vec3>>>,
-    /// Points of the canonical frame carried by the file itself (`canonical_points`).
+    /// Points of the canonical frame carried by the file itself (`points`).
     canonical_points: Option<Vec<Vec3>>,
     /// `inv_poses[k][p]`: inverse of poses[k][p], to bring frame k back to frame c.
     inv_poses: Vec<Vec<DMat4>>,
 }
-
-/// The extra key the page's export writes so a shared result can be viewed without
-/// its frames: the canonical frame's points, flat xyz (other readers ignore it).
-const POINTS_KEY: &str = "canonical_points";
 
 #[wasm_bindgen]
 impl Model {
     /// Opens a result JSON (format `gsart-result`, version 1). `file` names it in errors.
     pub fn from_json(text: &str, file: &str) -> Result<Model, JsError> {
         let result = FitResult::from_json(text, file).map_err(js_err)?;
-        let mut canonical_points = None;
-        if let Ok(value) = serde_json::from_str::<serde_json::Value>(text) {
-            if let Some(arr) = value.get(POINTS_KEY).and_then(|v| v.as_array()) {
-                let flat: Vec<f32> = arr
-                    .iter()
-                    .filter_map(|v| v.as_f64())
-                    .map(|v| v as f32)
-                    .collect();
-                let n = result.labels[result.canonical_frame].len();
-                if flat.len() != arr.len() || flat.len() != 3 * n {
-                    return Err(js_err(crate::Error::input(
-                        file,
-                        format!("{POINTS_KEY} has {} numbers, expected 3 × {n}", arr.len()),
-                    )));
-                }
-                canonical_points = Some(points_from_flat(&flat, file)?);
+        let c = result.canonical_frame;
+        let canonical_points = match &result.points {
+            Some(pts) if pts.len() == result.labels[c].len() => {
+                Some(pts.iter().map(|p| Vec3::from_array(*p)).collect())
             }
-        }
+            Some(pts) => {
+                return Err(js_err(crate::Error::input(
+                    file,
+                    format!(
+                        "`points` has {} entries but labels[{c}] has {}",
+                        pts.len(),
+                        result.labels[c].len()
+                    ),
+                )))
+            }
+            None => None,
+        };
         Model::new(result, canonical_points, file)
     }
 
@@ -453,32 +526,26 @@ impl Model {
         Ok(out.into())
     }
 
-    /// The result JSON; with `with_points`, the canonical frame's points are added under
-    /// `canonical_points` so the file opens on its own (`?model=URL`).
-    pub fn to_json(&self, with_points: bool) -> Result<String, JsError> {
-        let text = self.result.to_json();
-        if !with_points {
-            return Ok(text);
-        }
+    /// The result JSON; with `with_points`, the canonical frame's points are included
+    /// (key `points`) so the file opens on its own (`?model=URL`).
+    pub fn to_json(&self, with_points: bool) -> String {
         let c = self.result.canonical_frame;
-        let Some(points) = self.frame_points[c]
+        let points = self.frame_points[c]
             .as_ref()
-            .or(self.canonical_points.as_ref())
-        else {
-            return Ok(text);
-        };
-        let mut value: serde_json::Value = serde_json::from_str(&text)
-            .map_err(|e| JsError::new(&format!("internal: result JSON: {e}")))?;
-        // 1e-6 of the object's size is far below any sensor noise and keeps files small.
-        let round = |v: f32| ((v as f64) * 1e6).round() / 1e6;
-        let flat: Vec<f64> = points
-            .iter()
-            .flat_map(|p| [round(p.x), round(p.y), round(p.z)])
-            .collect();
-        if let serde_json::Value::Object(map) = &mut value {
-            map.insert(POINTS_KEY.to_string(), serde_json::json!(flat));
+            .or(self.canonical_points.as_ref());
+        match (with_points, points) {
+            (true, Some(p)) if self.result.points.is_none() => {
+                let mut r = self.result.clone();
+                r.points = Some(p.iter().map(|v| v.to_array()).collect());
+                r.to_json()
+            }
+            (false, _) if self.result.points.is_some() => {
+                let mut r = self.result.clone();
+                r.points = None;
+                r.to_json()
+            }
+            _ => self.result.to_json(),
         }
-        serde_json::to_string(&value).map_err(|e| JsError::new(&format!("internal: {e}")))
     }
 
     /// URDF of the model: one link per part (a box around its canonical points),

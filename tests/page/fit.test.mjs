@@ -70,7 +70,7 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   assert.equal(json.version, 1);
   assert.equal(json.frames, json.labels.length);
   assert.ok(Array.isArray(json.joints) && json.joints.length >= 1);
-  assert.ok(Array.isArray(json.canonical_points), 'the export carries the canonical points');
+  assert.ok(Array.isArray(json.points), 'the export carries the canonical points');
   const zipFile = await download(page, '#btn-export-ply');
   const zip = fs.readFileSync(zipFile);
   assert.equal(zip.subarray(0, 2).toString(), 'PK');

@@ -31,8 +31,13 @@ fn ply_round_trip_and_errors_in_wasm() {
         let err = read_ply(cut, "cut.ply").unwrap_err().to_string();
         assert!(err.contains("cut.ply"), "{err}");
     }
-    let err = read_ply(b"PK\x03\x04 not a ply", "archive.zip").unwrap_err().to_string();
-    assert!(err.contains("archive.zip") && err.to_lowercase().contains("zip"), "{err}");
+    let err = read_ply(b"PK\x03\x04 not a ply", "archive.zip")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("archive.zip") && err.to_lowercase().contains("zip"),
+        "{err}"
+    );
 }
 
 #[wasm_bindgen_test]
@@ -52,12 +57,18 @@ fn ground_truth_forward_kinematics_in_wasm() {
         o.frames = 4;
         o.points = 512;
         let s = generate(&o).unwrap();
-        let labels: Vec<Vec<u32>> =
-            s.sequence.frames.iter().map(|f| f.labels.clone().unwrap()).collect();
+        let labels: Vec<Vec<u32>> = s
+            .sequence
+            .frames
+            .iter()
+            .map(|f| f.labels.clone().unwrap())
+            .collect();
         let r = FitResult::from_ground_truth(&s.gt, labels, 1).unwrap();
         let chain = Chain::from_result(&r).unwrap();
         for k in 0..r.frames {
-            let poses = chain.part_poses(&r.root_pose(k).unwrap(), &r.joint_states(k)).unwrap();
+            let poses = chain
+                .part_poses(&r.root_pose(k).unwrap(), &r.joint_states(k))
+                .unwrap();
             for (p, pose) in poses.iter().enumerate() {
                 let want = r.pose(k, p).unwrap();
                 assert!(pose.abs_diff_eq(want, 1e-5), "{kind:?} frame {k} part {p}");

@@ -339,7 +339,6 @@ async function loadExample(name) {
   S.seqName = `${name} (example)`;
   S.example = name;
   S.gt = ex.gt;
-  S.heldout = ex.heldout.length ? { frames: ex.heldout.map((f) => f.points), names: ex.heldout.map((f) => f.name) } : null;
   S.frames = ex.frames.map((f) => ({ name: f.name, points: f.points, labels: f.labels ?? null, error: null, status: null }));
   S.current = 0;
   const url = new URL(location.href);
@@ -699,9 +698,8 @@ function renderResult(extra = {}) {
   const info = m.info();
   const notes = [];
   if (extra.best) notes.push(`chosen m = ${extra.best.m} Gaussians`);
-  if (info && typeof info === 'object') {
-    if (info.occlusion_used) notes.push(`occlusion handling ${info.occlusion_used}`);
-    if (info.downsampled) notes.push(String(info.downsampled));
+  if (info && typeof info === 'object' && Array.isArray(info.notes)) {
+    for (const n of info.notes) if (!/^model selection/.test(n) || !extra.best) notes.push(String(n));
   }
   if (notes.length) html += `<br><span class="muted">${escapeHtml(notes.join(' · '))}</span>`;
   $('result-summary').innerHTML = html;
