@@ -136,6 +136,7 @@ function resetResult() {
   if (S.model) { try { S.model.free(); } catch { /* already freed */ } }
   S.model = null;
   S.metrics = null;
+  S.metricsError = null;
   S.modelUrl = null;
   $('explore').hidden = true;
   $('explore-empty').hidden = false;
@@ -533,6 +534,7 @@ async function startFit() {
   const gtOk = S.gt && good.length === S.frames.length && good.every((f) => f.labels);
   buildStages(!!gtOk);
   $('progress').hidden = false;
+  $('step-fit').scrollIntoView({ block: 'start', behavior: 'smooth' });
   S.chart.clear('Step 1 loss');
   fitUi(true);
   setStepActive('step-fit');
@@ -628,9 +630,7 @@ async function startFit() {
   const best = out.candidates.find((c) => c.m === out.best) ?? null;
   $('fit-status').innerHTML = `<span class="msg-good">Done in ${fmtTime(secs)}.</span>`
     + (out.candidates.length > 1 ? ` Tried m = ${out.candidates.map((c) => c.m).join(', ')}.` : '');
-  S.metrics = out.metrics;
-  S.metricsError = out.metricsError;
-  openResult(out.result, S.seqName, 'fit', { seconds: secs, best });
+  openResult(out.result, S.seqName, 'fit', { seconds: secs, best, metrics: out.metrics, metricsError: out.metricsError });
 }
 
 function showSnapshot(m, snap) {
@@ -656,6 +656,8 @@ function openResult(text, source, how, extra = {}) {
   resetResult();
   S.model = model;
   S.modelSource = how;
+  S.metrics = extra.metrics ?? null;
+  S.metricsError = extra.metricsError ?? null;
   // Points: the loaded frames when they match the result, else the points the file carries.
   const good = goodFrames();
   let attached = false;
@@ -681,6 +683,7 @@ function openResult(text, source, how, extra = {}) {
   showFrame(Math.min(S.current, model.frames() - 1), { frameBox: how !== 'fit' });
   if (how !== 'fit') applyHashCamera();
   setStepActive('step-explore');
+  $('step-explore').scrollIntoView({ block: 'start', behavior: 'smooth' });
   return true;
 }
 
