@@ -27,11 +27,16 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   await page.goto(`${srv.base}/?example=laptop`);
   await waitLoaded(page);
   await page.locator('label:has(input[value=fast])').click();
+  // A manual part range (the laptop has 2 parts) keeps the test short.
+  await page.getByLabel('Automatic part range').uncheck();
+  await page.getByLabel('Minimum part count').fill('2');
+  await page.getByLabel('Maximum part count').fill('4');
   await page.locator('#btn-fit').click();
   assert.equal(await page.locator('#btn-cancel').isVisible(), true);
   assert.equal(await page.locator('#progress').isVisible(), true);
   // The Gaussians move in the view while Step 1 runs.
   await page.waitForFunction(() => /running|left/.test(document.querySelector('#stage-list').innerText), null, { timeout: 120_000 });
+  assert.match(await page.locator('#fit-status').innerText(), /m = 2…4/);
   await page.waitForTimeout(1500);
   const a = await canvasPng(page);
   await page.waitForTimeout(1500);

@@ -812,8 +812,8 @@ function highlightPart(p) {
 const METRIC_LABELS = [
   ['reconstruction_error', 'Reconstruction error', '×100, lower is better'],
   ['flow_error', 'Flow error (EPE)', '×100, lower is better'],
-  ['mean_rand_index', 'Rand index (mean over frames)', 'higher is better'],
-  ['rand_index_canonical', 'Rand index (canonical frame)', 'higher is better'],
+  ['mean_ri', 'Rand index (mean over frames)', 'higher is better'],
+  ['canonical_ri', 'Rand index (canonical frame)', 'higher is better'],
   ['tree_edit_distance', 'Tree edit distance', 'lower is better'],
   ['reanimation_error', 'Re-animation error', '×100, lower is better'],
 ];
@@ -847,6 +847,15 @@ function renderMetrics() {
   for (const [k, v] of Object.entries(mt)) {
     if (seen.has(k) || v === null || typeof v === 'object') continue;
     row(k.replace(/_/g, ' '), '', v);
+  }
+  for (const n of Array.isArray(mt.notes) ? mt.notes : []) {
+    const tr = document.createElement('tr');
+    const td = document.createElement('td');
+    td.colSpan = 2;
+    td.className = 'hint';
+    td.textContent = n;
+    tr.appendChild(td);
+    t.appendChild(tr);
   }
 }
 
