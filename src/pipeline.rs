@@ -275,6 +275,7 @@ pub fn finish(
         "iterations": step1.iterations,
         "working_sizes": working_sizes,
         "step1_seconds": step1.timings.total_s,
+        "candidates_timing": step1.timings.per_candidate,
         "kinematics_seconds": kin.timings,
         "notes": notes,
     }));
