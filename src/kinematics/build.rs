@@ -246,7 +246,9 @@ mod tests {
     use crate::io::gt::JointType;
 
     /// Two touching boxes of points; part 1 rotates about the z axis through (0.5,0,0).
-    fn scene() -> (Vec<Vec<Vec3>>, Vec<Vec<u32>>, Vec<Vec<DMat4>>) {
+    type Scene = (Vec<Vec<Vec3>>, Vec<Vec<u32>>, Vec<Vec<DMat4>>);
+
+    fn scene() -> Scene {
         let k = 4;
         let mut base = Vec::new();
         let mut lab = Vec::new();
