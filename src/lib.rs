@@ -4,6 +4,8 @@
 //! The core (everything but `web`) is platform-free: it compiles for the host and
 //! for `wasm32-unknown-unknown`, and never touches browser types.
 
+#[cfg(not(target_arch = "wasm32"))]
+pub mod bench;
 pub mod error;
 pub mod eval;
 pub mod fit;

@@ -125,3 +125,279 @@ pub fn fit_step1(
 pub fn default_part_range(seq: &crate::io::sequence::Sequence) -> (usize, usize) {
     crate::fit::select::default_part_range(seq)
 }
+
+/// A finished fit: the result in the result format, plus what the run found out.
+#[derive(Debug, Clone)]
+pub struct FitOutput {
+    pub result: crate::io::result::FitResult,
+    pub kin: crate::kinematics::KinReport,
+    /// Things the user should know (downsampling, occlusion handling, model selection).
+    pub notes: Vec<String>,
+}
+
+/// The whole pipeline: Step 1 with model selection (threads natively), then Steps 2–3.
+/// `cb` reports progress and may cancel at any point.
+#[cfg(not(target_arch = "wasm32"))]
+pub fn fit(
+    seq: &crate::io::sequence::Sequence,
+    opts: &FitOptions,
+    cb: &(dyn Fn(&Progress) -> Control + Sync),
+) -> crate::Result<FitOutput> {
+    let start = std::time::Instant::now();
+    let step1 = fit_step1(seq, opts, cb)?;
+    let clock = move || start.elapsed().as_secs_f64();
+    finish(seq, step1, &clock, &mut |p| cb(p))
+}
+
+/// Steps 2–3 on the selected Step-1 candidate, and the complete result: labels for every
+/// input point (frames larger than the working size are segmented in full by the
+/// Gaussians), Gaussians, tree, joints, root motion and the canonical frame's points.
+/// The browser calls this after its per-candidate workers finished (pick the candidate
+/// with [`select_candidate`]). `clock` returns seconds (any origin).
+pub fn finish(
+    seq: &crate::io::sequence::Sequence,
+    step1: crate::fit::Step1Result,
+    clock: &dyn Fn() -> f64,
+    cb: &mut dyn FnMut(&Progress) -> Control,
+) -> crate::Result<FitOutput> {
+    use crate::io::result::ResultGaussian;
+    let k = seq.frames.len();
+    if step1.labels.len() != k || step1.working.len() != k || step1.model.frames != k {
+        return Err(crate::Error::Sequence(format!(
+            "the Step-1 model has {} frames but the sequence {k}",
+            step1.model.frames
+        )));
+    }
+    let canonical = 0;
+    let mut points = Vec::with_capacity(k);
+    for (f, idx) in seq.frames.iter().zip(&step1.working) {
+        let mut w = Vec::with_capacity(idx.len());
+        for &i in idx {
+            let p = f.points.get(i as usize).copied().ok_or_else(|| {
+                crate::Error::Sequence(format!("{}: working point {i} out of range", f.name))
+            })?;
+            w.push(p);
+        }
+        points.push(w);
+    }
+    let m = step1.model.m;
+    let poses: Vec<Vec<glam::DMat4>> = (0..k)
+        .map(|t| (0..m).map(|i| step1.model.pose(t, i)).collect())
+        .collect();
+    let kin_opts = crate::kinematics::KinOptions::default();
+    let (mut result, kin) = crate::kinematics::build_articulated(
+        &points,
+        &step1.labels,
+        &poses,
+        canonical,
+        &kin_opts,
+        clock,
+        cb,
+    )?;
+
+    // Every input point gets a part: segment the full frames with the Gaussians, then
+    // map Gaussians to merged parts.
+    let part_of = |g: u32| kin.merge_map.get(g as usize).copied().unwrap_or(0);
+    result.labels = seq
+        .frames
+        .iter()
+        .enumerate()
+        .map(|(t, f)| {
+            step1
+                .model
+                .segment(t, &f.points)
+                .into_iter()
+                .map(part_of)
+                .collect()
+        })
+        .collect();
+    result.points = Some(
+        seq.frames[canonical]
+            .points
+            .iter()
+            .map(|p| p.to_array())
+            .collect(),
+    );
+    result.gaussians = Some(
+        (0..m)
+            .map(|i| {
+                let s = step1.model.log_scale[i].map(|v| (v as f64).exp());
+                ResultGaussian {
+                    part: part_of(i as u32) as usize,
+                    scale: s,
+                    rotation: (0..k)
+                        .map(|t| {
+                            let r = glam::DMat3::from_mat4(step1.model.pose(t, i)).transpose();
+                            r.to_cols_array()
+                        })
+                        .collect(),
+                    center: (0..k)
+                        .map(|t| step1.model.center[t * m + i].map(|v| v as f64))
+                        .collect(),
+                }
+            })
+            .collect(),
+    );
+    let mut notes = Vec::new();
+    let working_sizes: Vec<usize> = step1.working.iter().map(|w| w.len()).collect();
+    let reduced = seq
+        .frames
+        .iter()
+        .zip(&working_sizes)
+        .filter(|(f, &w)| w < f.points.len())
+        .count();
+    if reduced > 0 {
+        notes.push(format!(
+            "{reduced} of {k} frames were downsampled for the fit (working size {}); every input point is labelled",
+            working_sizes.iter().max().copied().unwrap_or(0)
+        ));
+    }
+    notes.push(format!(
+        "occlusion handling: {}",
+        if step1.occlusion_used {
+            "on (partial/occluded losses)"
+        } else {
+            "off (full-surface losses)"
+        }
+    ));
+    notes.push(format!(
+        "model selection: m = {} of {:?} (lowest final Chamfer); {} parts after merging",
+        step1.m,
+        step1.candidates.iter().map(|c| c.0).collect::<Vec<_>>(),
+        result.parts
+    ));
+    result.info = Some(serde_json::json!({
+        "generator": concat!("gsart ", env!("CARGO_PKG_VERSION")),
+        "m": step1.m,
+        "candidates": step1.candidates,
+        "final_chamfer": step1.final_chamfer,
+        "occlusion_used": step1.occlusion_used,
+        "iterations": step1.iterations,
+        "working_sizes": working_sizes,
+        "step1_seconds": step1.timings.total_s,
+        "candidates_timing": step1.timings.per_candidate,
+        "kinematics_seconds": kin.timings,
+        "notes": notes,
+    }));
+    result.validate("result")?;
+    Ok(FitOutput { result, kin, notes })
+}
+
+/// Model selection among finished candidates: the lowest final Chamfer loss.
+pub fn select_candidate(
+    candidates: Vec<crate::fit::Step1Result>,
+) -> crate::Result<crate::fit::Step1Result> {
+    let all: Vec<(usize, f64)> = candidates.iter().map(|c| (c.m, c.final_chamfer)).collect();
+    let mut best = candidates
+        .into_iter()
+        .min_by(|a, b| a.final_chamfer.total_cmp(&b.final_chamfer))
+        .ok_or_else(|| {
+            crate::Error::InvalidArgument("no Step-1 candidate to select from".into())
+        })?;
+    best.candidates = all;
+    Ok(best)
+}
+
+/// Metrics of a result against ground truth: `seq` is the input sequence (its frames
+/// carry the ground-truth labels), `gt` its `gt.json`.
+pub fn evaluate(
+    result: &crate::io::result::FitResult,
+    seq: &crate::io::sequence::Sequence,
+    gt: &crate::io::gt::GroundTruth,
+) -> crate::Result<crate::eval::Metrics> {
+    let c = result.canonical_frame;
+    let mut frame_labels = Vec::with_capacity(seq.frames.len());
+    for f in &seq.frames {
+        let l = f.labels.clone().ok_or_else(|| {
+            crate::Error::input(
+                &f.name,
+                "no `part`/`label` property: the ground truth needs per-point labels",
+            )
+        })?;
+        frame_labels.push(l);
+    }
+    let canonical = seq.frames.get(c).ok_or_else(|| {
+        crate::Error::Sequence(format!("canonical frame {c} is not in the sequence"))
+    })?;
+    crate::eval::evaluate(
+        result,
+        gt,
+        &canonical.points,
+        &frame_labels[c],
+        &frame_labels,
+    )
+}
+
+/// Re-articulation: the canonical frame's points re-posed by forward kinematics with
+/// joint `states` (in the order of `result.joints`) and the root motion of `frame`
+/// (default: the canonical frame). The one code path of the page's sliders, the CLI's
+/// `articulate` and the metrics' re-animation (all through `kinematics::chain`).
+pub fn articulate(
+    result: &crate::io::result::FitResult,
+    states: &[f64],
+    frame: Option<usize>,
+) -> crate::Result<Vec<glam::Vec3>> {
+    let bad = |m: String| crate::Error::InvalidArgument(m);
+    let points = result
+        .points
+        .as_ref()
+        .ok_or_else(|| bad("the result carries no points (key `points`)".into()))?;
+    let joints = result.joints.as_deref().unwrap_or(&[]);
+    if states.len() != joints.len() {
+        return Err(bad(format!(
+            "{} joint states given, the model has {} joints",
+            states.len(),
+            joints.len()
+        )));
+    }
+    let frame = frame.unwrap_or(result.canonical_frame);
+    if frame >= result.frames {
+        return Err(bad(format!(
+            "frame {frame}: the result has {} frames",
+            result.frames
+        )));
+    }
+    let chain = crate::kinematics::chain::Chain::from_result(result)?;
+    let mut part_states = vec![0.0; result.parts];
+    for (j, &q) in joints.iter().zip(states) {
+        if !q.is_finite() {
+            return Err(bad(format!("joint state {q} is not finite")));
+        }
+        part_states[j.child] = q;
+    }
+    let root = result
+        .root_pose(frame)
+        .ok_or_else(|| bad(format!("no root pose for frame {frame}")))?;
+    let poses = chain.part_poses(&root, &part_states)?;
+    let labels = &result.labels[result.canonical_frame];
+    Ok(points
+        .iter()
+        .zip(labels)
+        .map(|(p, &l)| {
+            let x = poses[l as usize].transform_point3(glam::DVec3::new(
+                p[0] as f64,
+                p[1] as f64,
+                p[2] as f64,
+            ));
+            x.as_vec3()
+        })
+        .collect())
+}
+
+/// URDF of a result, with link geometry fitted to each part's canonical points.
+pub fn urdf(
+    result: &crate::io::result::FitResult,
+    seq: &crate::io::sequence::Sequence,
+    name: &str,
+) -> crate::Result<String> {
+    let c = result.canonical_frame;
+    let pts = &seq
+        .frames
+        .get(c)
+        .ok_or_else(|| {
+            crate::Error::Sequence(format!("canonical frame {c} is not in the sequence"))
+        })?
+        .points;
+    let part_points = crate::io::urdf::canonical_part_points(result, pts);
+    crate::io::urdf::to_urdf(result, &part_points, name)
+}

@@ -4,8 +4,8 @@
 //
 // Messages in:  {id, type: 'parse', files: [{name, bytes: ArrayBuffer}]}
 //               {id, type: 'example', name, seed}
-//               {id, type: 'start', frames: [Float32Array], names, m, options}
-//               {id, type: 'finish', frames, names, candidates: [string], options, gt?, heldout?}
+//               {id, type: 'start', frames: [Float32Array], names, m, options}  (keeps the candidate)
+//               {id, type: 'finish', m, frames, names, options, gt?, labels?}  (Steps 2–3 on candidate m)
 // Messages out: {id, type: 'progress', ...} (≤ ~20/s), {id, type: 'result', ...}, {id, type: 'error', message}
 // Cancel: the page terminates the worker (a running wasm loop cannot read messages).
 import init, * as gsart from './pkg/gsart.js';
@@ -47,7 +47,7 @@ async function handle(msg) {
     case 'example': {
       const ex = gsart.generate_example(msg.name, BigInt(msg.seed ?? 0));
       const arrays = [];
-      for (const f of [...ex.frames, ...ex.heldout]) arrays.push(f.points, f.labels);
+      for (const f of ex.frames) arrays.push(f.points, f.labels);
       self.postMessage({ id, type: 'result', example: ex }, buffersOf(arrays));
       break;
     }
@@ -55,23 +55,23 @@ async function handle(msg) {
       const working = gsart.working_clouds(msg.frames, msg.names, msg.options);
       self.postMessage({ id, type: 'working', m: msg.m, frames: working }, buffersOf(working));
       const t0 = performance.now();
-      const candidate = gsart.fit_candidate(msg.frames, msg.names, msg.m, msg.options,
+      const c = gsart.fit_candidate(msg.frames, msg.names, msg.m, msg.options,
         (p) => postProgress(id, { m: msg.m, ...p }));
-      self.postMessage({ id, type: 'result', m: msg.m, candidate: candidate.json, loss: candidate.loss,
-        ms: performance.now() - t0 });
+      self.postMessage({ id, type: 'result', m: msg.m, loss: c.loss, iterations: c.iterations,
+        occlusionUsed: c.occlusion_used, ms: performance.now() - t0 });
       break;
     }
     case 'finish': {
       const t0 = performance.now();
-      const result = gsart.finish(msg.frames, msg.names, msg.candidates, msg.options,
+      // Steps 2–3 on the candidate this worker fitted (the best one).
+      const result = gsart.finish(msg.frames, msg.names, msg.m, msg.candidates,
         (p) => postProgress(id, p));
       let metrics = null;
       let metricsError = null;
       if (msg.gt) {
         postProgress(id, { stage: 'metrics', iter: 0, total: 1, losses: {} });
         try {
-          metrics = gsart.evaluate(result, msg.frames, msg.names, msg.gt,
-            msg.heldout?.frames ?? [], msg.heldout?.names ?? []);
+          metrics = gsart.evaluate(result, msg.frames, msg.labels, msg.gt);
         } catch (e) {
           metricsError = errorMessage(e);
         }

@@ -1,9 +1,501 @@
-//! The `gsart` command line: a thin layer over the core.
+//! The `gsart` command line: a thin layer over the core (`fit`, `eval`, `synth`,
+//! `articulate`, `bench`). Every error is printed as one line naming the file and the
+//! problem, with exit code 1 (2 for usage errors, by clap).
+
+#[cfg(not(target_arch = "wasm32"))]
+mod cli {
+    use std::io::Write;
+    use std::path::{Path, PathBuf};
+    use std::time::Instant;
+
+    use clap::{Parser, Subcommand};
+    use gsart::io::gt::GroundTruth;
+    use gsart::io::result::FitResult;
+    use gsart::io::sequence::{gt_path, Sequence};
+    use gsart::pipeline::{self, Control, FitOptions, Occlusion, Progress, Quality, Stage};
+    use gsart::{Error, Result};
+
+    #[derive(Parser)]
+    #[command(
+        name = "gsart",
+        version,
+        about = "Articulated models from point-cloud sequences (GSArt)"
+    )]
+    struct Cli {
+        #[command(subcommand)]
+        command: Command,
+    }
+
+    #[derive(Subcommand)]
+    enum Command {
+        /// Fit an articulated model to a sequence (a folder of PLY frames, or PLY files).
+        Fit {
+            /// A sequence folder, or two or more PLY files (natural filename order).
+            #[arg(required = true)]
+            input: Vec<PathBuf>,
+            /// Where to write the result JSON.
+            #[arg(long)]
+            out: PathBuf,
+            /// Range of Gaussian counts to try, e.g. `10..15` or `8` (default: from the data).
+            #[arg(long)]
+            parts: Option<String>,
+            /// Step-1 iterations per candidate (overrides the quality preset).
+            #[arg(long)]
+            iters: Option<usize>,
+            /// Quality preset: fast, balanced or paper.
+            #[arg(long, default_value = "balanced")]
+            quality: String,
+            /// Occlusion handling: auto, on or off.
+            #[arg(long, default_value = "auto")]
+            occlusion: String,
+            #[arg(long, default_value_t = 0)]
+            seed: u64,
+            /// Frames larger than this are downsampled for the fit.
+            #[arg(long, default_value_t = 4096)]
+            working_size: usize,
+            /// Also write the segmented frames (PLY with `part`) into this folder.
+            #[arg(long)]
+            ply_out: Option<PathBuf>,
+            /// Also write a URDF of the recovered model.
+            #[arg(long)]
+            urdf: Option<PathBuf>,
+            /// No progress bar.
+            #[arg(long)]
+            quiet: bool,
+        },
+        /// Metrics of a result against a sequence folder's ground truth (gt.json), as JSON.
+        Eval { result: PathBuf, seq_dir: PathBuf },
+        /// Generate a procedural articulated object in the benchmark format.
+        Synth {
+            /// laptop, cabinet, arm, hand, quadruped, or `all`.
+            kind: String,
+            /// Output folder (for `all`: one sub-folder per object).
+            #[arg(long)]
+            out: PathBuf,
+            #[arg(long, default_value_t = 10)]
+            frames: usize,
+            /// Points per frame (default: the object's own default).
+            #[arg(long)]
+            points: Option<usize>,
+            #[arg(long, default_value_t = 3)]
+            heldout: usize,
+            /// Keep only the points visible from a random camera per frame.
+            #[arg(long)]
+            occluded: bool,
+            #[arg(long, default_value_t = 0)]
+            seed: u64,
+        },
+        /// Re-pose a fitted model with joint states and write the points as PLY.
+        Articulate {
+            result: PathBuf,
+            /// Joint states in the order of the result's `joints`, comma separated.
+            #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+            states: Vec<f64>,
+            /// Use this frame's root motion (default: the canonical frame).
+            #[arg(long)]
+            frame: Option<usize>,
+            #[arg(long)]
+            out: PathBuf,
+        },
+        /// Benchmark the pipeline on the reference workloads (and optionally sequence folders).
+        Bench {
+            /// Workloads: robot, object (default both).
+            #[arg(long, value_delimiter = ',')]
+            workload: Vec<String>,
+            /// Extra sequence folders to fit and evaluate (e.g. ../shared/bench-dev/full/*).
+            #[arg(long)]
+            seq: Vec<PathBuf>,
+            #[arg(long, default_value = "balanced")]
+            quality: String,
+            #[arg(long)]
+            iters: Option<usize>,
+            /// Write the report as JSON here too.
+            #[arg(long)]
+            json: Option<PathBuf>,
+        },
+    }
+
+    pub fn main() -> i32 {
+        let cli = Cli::parse();
+        let r = match cli.command {
+            Command::Fit {
+                input,
+                out,
+                parts,
+                iters,
+                quality,
+                occlusion,
+                seed,
+                working_size,
+                ply_out,
+                urdf,
+                quiet,
+            } => parse_options(
+                parts.as_deref(),
+                iters,
+                &quality,
+                &occlusion,
+                seed,
+                working_size,
+            )
+            .and_then(|opts| {
+                fit(
+                    &input,
+                    &out,
+                    &opts,
+                    ply_out.as_deref(),
+                    urdf.as_deref(),
+                    quiet,
+                )
+            }),
+            Command::Eval { result, seq_dir } => eval(&result, &seq_dir),
+            Command::Synth {
+                kind,
+                out,
+                frames,
+                points,
+                heldout,
+                occluded,
+                seed,
+            } => synth(&kind, &out, frames, points, heldout, occluded, seed),
+            Command::Articulate {
+                result,
+                states,
+                frame,
+                out,
+            } => articulate(&result, &states, frame, &out),
+            Command::Bench {
+                workload,
+                seq,
+                quality,
+                iters,
+                json,
+            } => parse_options(None, iters, &quality, "auto", 0, 4096)
+                .and_then(|opts| bench(&workload, &seq, &opts, json.as_deref())),
+        };
+        match r {
+            Ok(()) => 0,
+            Err(e) => {
+                eprintln!("gsart: {e}");
+                1
+            }
+        }
+    }
+
+    fn parse_options(
+        parts: Option<&str>,
+        iters: Option<usize>,
+        quality: &str,
+        occlusion: &str,
+        seed: u64,
+        working_size: usize,
+    ) -> Result<FitOptions> {
+        let bad = |m: String| Error::InvalidArgument(m);
+        let quality = match quality {
+            "fast" => Quality::Fast,
+            "balanced" => Quality::Balanced,
+            "paper" => Quality::Paper,
+            q => {
+                return Err(bad(format!(
+                    "--quality {q}: expected fast, balanced or paper"
+                )))
+            }
+        };
+        let occlusion = match occlusion {
+            "auto" => Occlusion::Auto,
+            "on" => Occlusion::On,
+            "off" => Occlusion::Off,
+            o => return Err(bad(format!("--occlusion {o}: expected auto, on or off"))),
+        };
+        let parts = match parts {
+            None => None,
+            Some(s) => {
+                let num = |t: &str| {
+                    t.trim().parse::<usize>().map_err(|_| {
+                        bad(format!(
+                            "--parts {s}: expected a count like 8 or a range like 10..15"
+                        ))
+                    })
+                };
+                let (a, b) = match s.split_once("..") {
+                    Some((a, b)) => (num(a)?, num(b.trim_start_matches('='))?),
+                    None => (num(s)?, num(s)?),
+                };
+                if a < 2 || b < a || b > 64 {
+                    return Err(bad(format!("--parts {s}: need 2 ≤ A ≤ B ≤ 64")));
+                }
+                Some((a, b))
+            }
+        };
+        if working_size < 16 {
+            return Err(bad("--working-size must be at least 16".into()));
+        }
+        Ok(FitOptions {
+            parts,
+            quality,
+            iters,
+            occlusion,
+            seed,
+            working_size,
+        })
+    }
+
+    /// Sequence folder or file list → frames, plus the ground truth when a folder has one.
+    fn load(input: &[PathBuf]) -> Result<(Sequence, Option<GroundTruth>)> {
+        if input.len() == 1 && input[0].is_dir() {
+            let seq = Sequence::from_dir(&input[0])?;
+            let gt = match gt_path(&input[0]) {
+                Some(p) => Some(read_gt(&p)?),
+                None => None,
+            };
+            Ok((seq, gt))
+        } else {
+            for p in input {
+                if p.is_dir() {
+                    return Err(Error::input(
+                        p.display().to_string(),
+                        "give either one sequence folder or a list of PLY files",
+                    ));
+                }
+            }
+            Ok((Sequence::from_files(input)?, None))
+        }
+    }
+
+    fn read_text(p: &Path) -> Result<String> {
+        std::fs::read_to_string(p).map_err(|e| Error::io(p.display().to_string(), e))
+    }
+
+    fn write_text(p: &Path, text: &str) -> Result<()> {
+        std::fs::write(p, text).map_err(|e| Error::io(p.display().to_string(), e))
+    }
+
+    fn read_gt(p: &Path) -> Result<GroundTruth> {
+        GroundTruth::from_json(&read_text(p)?, &p.display().to_string())
+    }
+
+    fn read_result(p: &Path) -> Result<FitResult> {
+        FitResult::from_json(&read_text(p)?, &p.display().to_string())
+    }
+
+    /// A one-line terminal progress bar (stderr), redrawn at most ~10 times a second.
+    struct Bar {
+        quiet: bool,
+        last: Option<Instant>,
+        start: Instant,
+    }
+
+    impl Bar {
+        fn new(quiet: bool) -> Self {
+            Bar {
+                quiet,
+                last: None,
+                start: Instant::now(),
+            }
+        }
+        fn show(&mut self, p: &Progress) {
+            if self.quiet {
+                return;
+            }
+            let now = Instant::now();
+            let done = p.stage == Stage::Done;
+            if !done
+                && self
+                    .last
+                    .is_some_and(|t| now.duration_since(t).as_millis() < 100)
+            {
+                return;
+            }
+            self.last = Some(now);
+            let frac = if p.total > 0 {
+                p.iter as f64 / p.total as f64
+            } else {
+                0.0
+            };
+            let width = 30;
+            let filled = ((frac * width as f64) as usize).min(width);
+            let losses: Vec<String> = p
+                .losses
+                .iter()
+                .take(3)
+                .map(|(k, v)| format!("{k} {v:.4}"))
+                .collect();
+            let m = p.m.map(|m| format!(" m={m}")).unwrap_or_default();
+            eprint!(
+                "\r\x1b[K{:>9}{m} [{}{}] {:>5}/{:<5} {:>6.1}s  {}",
+                format!("{:?}", p.stage).to_lowercase(),
+                "#".repeat(filled),
+                "-".repeat(width - filled),
+                p.iter,
+                p.total,
+                self.start.elapsed().as_secs_f64(),
+                losses.join("  ")
+            );
+            if done {
+                eprintln!();
+            }
+            let _ = std::io::stderr().flush();
+        }
+    }
+
+    fn fit(
+        input: &[PathBuf],
+        out: &Path,
+        opts: &FitOptions,
+        ply_out: Option<&Path>,
+        urdf: Option<&Path>,
+        quiet: bool,
+    ) -> Result<()> {
+        let t0 = Instant::now();
+        let (seq, gt) = load(input)?;
+        let bar = std::sync::Mutex::new(Bar::new(quiet));
+        let cb = |p: &Progress| {
+            if let Ok(mut b) = bar.lock() {
+                b.show(p);
+            }
+            Control::Continue
+        };
+        let output = pipeline::fit(&seq, opts, &cb)?;
+        if !quiet {
+            eprintln!();
+        }
+        for note in &output.notes {
+            eprintln!("note: {note}");
+        }
+        let result = &output.result;
+        write_text(out, &result.to_json())?;
+        eprintln!(
+            "wrote {} ({} parts, {} joints) in {:.1} s",
+            out.display(),
+            result.parts,
+            result.joints.as_ref().map_or(0, |j| j.len()),
+            t0.elapsed().as_secs_f64()
+        );
+        if let Some(dir) = ply_out {
+            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir.display().to_string(), e))?;
+            for (k, frame) in seq.frames.iter().enumerate() {
+                let stem = Path::new(&frame.name)
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().to_string())
+                    .unwrap_or_else(|| format!("frame_{k:03}"));
+                let path = dir.join(format!("{stem}_parts.ply"));
+                let mut buf = Vec::new();
+                gsart::io::ply::write_ply(&mut buf, &frame.points, Some(&result.labels[k]), false)
+                    .map_err(|e| Error::io(path.display().to_string(), e))?;
+                std::fs::write(&path, buf).map_err(|e| Error::io(path.display().to_string(), e))?;
+            }
+            eprintln!(
+                "wrote {} segmented frames to {}",
+                seq.frames.len(),
+                dir.display()
+            );
+        }
+        if let Some(path) = urdf {
+            let text = pipeline::urdf(result, &seq, "gsart_model")?;
+            write_text(path, &text)?;
+            eprintln!("wrote {}", path.display());
+        }
+        if let Some(gt) = gt {
+            let m = pipeline::evaluate(result, &seq, &gt)?;
+            eprintln!("metrics: {}", serde_json::to_string(&m).unwrap_or_default());
+        }
+        Ok(())
+    }
+
+    fn eval(result: &Path, seq_dir: &Path) -> Result<()> {
+        let result = read_result(result)?;
+        let seq = Sequence::from_dir(seq_dir)?;
+        let gt_file = gt_path(seq_dir).ok_or_else(|| {
+            Error::input(seq_dir.display().to_string(), "no gt.json in this folder")
+        })?;
+        let gt = read_gt(&gt_file)?;
+        let m = pipeline::evaluate(&result, &seq, &gt)?;
+        println!("{}", serde_json::to_string_pretty(&m).unwrap_or_default());
+        Ok(())
+    }
+
+    fn synth(
+        kind: &str,
+        out: &Path,
+        frames: usize,
+        points: Option<usize>,
+        heldout: usize,
+        occluded: bool,
+        seed: u64,
+    ) -> Result<()> {
+        use gsart::synth::{example_names, generate, write_sequence_dir, ObjectKind, SynthOptions};
+        let kinds: Vec<ObjectKind> = if kind == "all" {
+            example_names()
+                .iter()
+                .map(|n| n.parse())
+                .collect::<Result<_>>()?
+        } else {
+            vec![kind.parse()?]
+        };
+        for k in kinds {
+            let mut o = SynthOptions::new(k);
+            o.frames = frames;
+            if let Some(p) = points {
+                o.points = p;
+            }
+            o.heldout = heldout;
+            o.occluded = occluded;
+            o.seed = seed;
+            let generated = generate(&o)?;
+            let dir = if kind == "all" {
+                out.join(k.name())
+            } else {
+                out.to_path_buf()
+            };
+            write_sequence_dir(&generated, &dir)?;
+            eprintln!(
+                "wrote {} ({} frames, {} parts) to {}",
+                k.name(),
+                generated.sequence.frames.len(),
+                generated.gt.num_parts,
+                dir.display()
+            );
+        }
+        Ok(())
+    }
+
+    fn articulate(result: &Path, states: &[f64], frame: Option<usize>, out: &Path) -> Result<()> {
+        let name = result.display().to_string();
+        let result = read_result(result)?;
+        let points = pipeline::articulate(&result, states, frame).map_err(|e| match e {
+            Error::InvalidArgument(m) => Error::input(&name, m),
+            e => e,
+        })?;
+        let labels = &result.labels[result.canonical_frame];
+        let mut buf = Vec::new();
+        gsart::io::ply::write_ply(&mut buf, &points, Some(labels), false)
+            .map_err(|e| Error::io(out.display().to_string(), e))?;
+        std::fs::write(out, buf).map_err(|e| Error::io(out.display().to_string(), e))?;
+        eprintln!("wrote {} points to {}", points.len(), out.display());
+        Ok(())
+    }
+
+    fn bench(
+        workloads: &[String],
+        seqs: &[PathBuf],
+        opts: &FitOptions,
+        json: Option<&Path>,
+    ) -> Result<()> {
+        let report = gsart::bench::run(workloads, seqs, opts)?;
+        println!("{}", report.table());
+        if let Some(p) = json {
+            write_text(
+                p,
+                &serde_json::to_string_pretty(&report).unwrap_or_default(),
+            )?;
+        }
+        Ok(())
+    }
+}
 
 #[cfg(not(target_arch = "wasm32"))]
 fn main() {
-    eprintln!("gsart: no commands yet");
-    std::process::exit(2);
+    std::process::exit(cli::main());
 }
 
 #[cfg(target_arch = "wasm32")]

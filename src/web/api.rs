@@ -4,14 +4,15 @@
 //! Only conversions live here; every decision is made by the core.
 
 use glam::{DMat3, DMat4, DVec3, Vec3};
-use js_sys::{
-    Array, Float32Array, Float64Array, Function, Object, Reflect, Uint32Array, Uint8Array,
-};
+use js_sys::{Array, Float32Array, Function, Object, Reflect, Uint32Array, Uint8Array};
 use serde::Serialize;
+use std::cell::RefCell;
+
 use wasm_bindgen::prelude::*;
 
+use crate::fit::Step1Result;
 use crate::geom::se3::{from_row_major, rigid_inverse};
-use crate::io::gt::JointType;
+use crate::io::gt::{GroundTruth, JointType};
 use crate::io::ply::write_ply;
 use crate::io::result::FitResult;
 use crate::io::sequence::{natural_cmp, Frame, LoadOptions, Sequence};
@@ -57,7 +58,7 @@ fn flat_points(points: &[Vec3]) -> Float32Array {
 }
 
 fn points_from_flat(flat: &[f32], name: &str) -> Result<Vec<Vec3>, JsError> {
-    if flat.len() % 3 != 0 {
+    if !flat.len().is_multiple_of(3) {
         return Err(js_err(crate::Error::input(
             name,
             format!("{} coordinates is not a multiple of 3", flat.len()),
@@ -150,6 +151,149 @@ pub fn natural_order(names: Vec<String>) -> Vec<u32> {
     idx
 }
 
+// ------------------------------------------------------------------ fitting
+
+thread_local! {
+    /// Step-1 candidates fitted by this worker, kept so the worker holding the best one
+    /// can go on with Steps 2–3 without sending the model across workers.
+    static CANDIDATES: RefCell<Vec<Step1Result>> = const { RefCell::new(Vec::new()) };
+}
+
+/// The core's default part-count range for these frames: `[lo, hi]`.
+#[wasm_bindgen]
+pub fn default_part_range(frames: Array, names: Array) -> Result<Vec<u32>, JsError> {
+    let seq = sequence_from_js(&frames, &names)?;
+    let (lo, hi) = crate::pipeline::default_part_range(&seq);
+    Ok(vec![lo as u32, hi as u32])
+}
+
+/// The working clouds the fit sees (frames above the working size downsampled, as
+/// the core does it), so snapshot labels can be drawn on their points.
+#[wasm_bindgen]
+pub fn working_clouds(frames: Array, names: Array, options: JsValue) -> Result<Array, JsError> {
+    let seq = sequence_from_js(&frames, &names)?;
+    let opts = options_from_js(options)?;
+    let (clouds, _) = crate::fit::select::working_clouds(&seq, opts.working_size, opts.seed);
+    let out = Array::new();
+    for c in &clouds {
+        out.push(&flat_points(c));
+    }
+    Ok(out)
+}
+
+/// Step 1 for one candidate part count `m`, reporting progress to `on_progress`
+/// (≤ ~20 calls/s). Keeps the candidate in this worker and returns
+/// `{m, loss, iterations, occlusion_used}` (`loss`: the model-selection Chamfer).
+#[wasm_bindgen]
+pub fn fit_candidate(
+    frames: Array,
+    names: Array,
+    m: usize,
+    options: JsValue,
+    on_progress: &Function,
+) -> Result<JsValue, JsError> {
+    let seq = sequence_from_js(&frames, &names)?;
+    let opts = options_from_js(options)?;
+    let mut throttle = Throttle::new(on_progress);
+    let r = crate::pipeline::fit_step1_single(&seq, m, &opts, &mut |p| throttle.report(p))
+        .map_err(js_err)?;
+    let o = Object::new();
+    set(&o, "m", &JsValue::from_f64(m as f64));
+    set(&o, "loss", &JsValue::from_f64(r.final_chamfer));
+    set(&o, "iterations", &JsValue::from_f64(r.iterations as f64));
+    set(&o, "occlusion_used", &JsValue::from_bool(r.occlusion_used));
+    CANDIDATES.with(|c| c.borrow_mut().push(r));
+    Ok(o.into())
+}
+
+/// Steps 2–3 on candidate `m` fitted by this worker (the one the page selected),
+/// with every candidate's `[m, loss]` for the result's notes. Returns the result JSON
+/// (with the canonical points, so it opens on its own).
+#[wasm_bindgen]
+pub fn finish(
+    frames: Array,
+    names: Array,
+    m: usize,
+    candidates: Array,
+    on_progress: &Function,
+) -> Result<String, JsError> {
+    let seq = sequence_from_js(&frames, &names)?;
+    let mut step1 = CANDIDATES
+        .with(|c| {
+            let mut c = c.borrow_mut();
+            let i = c.iter().position(|r| r.m == m)?;
+            Some(c.swap_remove(i))
+        })
+        .ok_or_else(|| {
+            JsError::new(&format!(
+                "internal: candidate m = {m} is not in this worker"
+            ))
+        })?;
+    let mut all = Vec::new();
+    for pair in candidates.iter() {
+        let pair = Array::from(&pair);
+        if let (Some(cm), Some(loss)) = (pair.get(0).as_f64(), pair.get(1).as_f64()) {
+            all.push((cm as usize, loss));
+        }
+    }
+    if !all.is_empty() {
+        step1.candidates = all;
+    }
+    let mut throttle = Throttle::new(on_progress);
+    let clock = || js_sys::Date::now() / 1000.0;
+    let out = crate::pipeline::finish(&seq, step1, &clock, &mut |p| throttle.report(p))
+        .map_err(js_err)?;
+    Ok(out.result.to_json())
+}
+
+/// The candidate the core's rule selects among `(m, loss)` pairs (lowest final
+/// Chamfer, ties to the smaller m), so the page knows which worker goes on.
+#[wasm_bindgen]
+pub fn best_candidate(ms: Vec<u32>, losses: Vec<f64>) -> Result<u32, JsError> {
+    ms.iter()
+        .zip(&losses)
+        .filter(|(_, l)| l.is_finite())
+        .min_by(|a, b| a.1.total_cmp(b.1).then(a.0.cmp(b.0)))
+        .map(|(&m, _)| m)
+        .ok_or_else(|| JsError::new("no candidate finished with a finite loss"))
+}
+
+/// Metrics of a result against ground truth (SPEC §5): `gt` is `gt.json` text,
+/// `frames`/`labels` the observed points and their ground-truth part labels per frame
+/// (the order of the result's labels). Returns `{mean_ri, canonical_ri,
+/// reconstruction_error, flow_error, tree_edit_distance, reanimation_error, notes}`.
+#[wasm_bindgen]
+pub fn evaluate(
+    result_json: &str,
+    frames: Array,
+    labels: Array,
+    gt_json: &str,
+) -> Result<JsValue, JsError> {
+    let result = FitResult::from_json(result_json, "result").map_err(js_err)?;
+    let gt = GroundTruth::from_json(gt_json, "gt.json").map_err(js_err)?;
+    let mut frame_labels = Vec::with_capacity(labels.length() as usize);
+    for (k, l) in labels.iter().enumerate() {
+        let l: Uint32Array = l.dyn_into().map_err(|_| {
+            JsError::new(&format!(
+                "frame {k} has no ground-truth part labels: no metrics"
+            ))
+        })?;
+        frame_labels.push(l.to_vec());
+    }
+    let c = result.canonical_frame;
+    let flat: Float32Array = frames
+        .get(c as u32)
+        .dyn_into()
+        .map_err(|_| JsError::new(&format!("the canonical frame {c} is missing")))?;
+    let points = points_from_flat(&flat.to_vec(), "canonical frame")?;
+    let canonical_labels = frame_labels
+        .get(c)
+        .ok_or_else(|| JsError::new(&format!("the canonical frame {c} has no labels")))?;
+    let metrics = crate::eval::evaluate(&result, &gt, &points, canonical_labels, &frame_labels)
+        .map_err(js_err)?;
+    to_js(&metrics)
+}
+
 /// Names of the built-in examples, in menu order.
 #[wasm_bindgen]
 pub fn example_names() -> Vec<String> {
@@ -166,8 +310,8 @@ pub fn example_description(name: &str) -> Result<String, JsError> {
     Ok(kind.describe().to_string())
 }
 
-/// Generates a built-in example: `{name, frames: [{name, points, labels}], gt: string,
-/// heldout: [{name, points, labels}]}` (the ground truth as `gt.json` text).
+/// Generates a built-in example: `{name, frames: [{name, points, labels}], gt}`
+/// (`gt`: the ground truth as `gt.json` text, for the metrics).
 #[wasm_bindgen]
 pub fn generate_example(name: &str, seed: u64) -> Result<JsValue, JsError> {
     let kind: ObjectKind = name.parse().map_err(js_err)?;
@@ -183,11 +327,6 @@ pub fn generate_example(name: &str, seed: u64) -> Result<JsValue, JsError> {
         frames.push(&frame_js(f));
     }
     set(&o, "frames", &frames);
-    let heldout = Array::new();
-    for f in &out.heldout {
-        heldout.push(&frame_js(f));
-    }
-    set(&o, "heldout", &heldout);
     set(&o, "gt", &JsValue::from_str(&synth::gt_json(&out)));
     Ok(o.into())
 }
@@ -202,39 +341,34 @@ pub struct Model {
     chain: Option<Chain>,
     /// Input points per frame when the page has them (labels[k] order).
     frame_points: Vec<Option<Vec<Vec3>>>,
-    /// Points of the canonical frame carried by the file itself (`canonical_points`).
+    /// Points of the canonical frame carried by the file itself (`points`).
     canonical_points: Option<Vec<Vec3>>,
     /// `inv_poses[k][p]`: inverse of poses[k][p], to bring frame k back to frame c.
     inv_poses: Vec<Vec<DMat4>>,
 }
-
-/// The extra key the page's export writes so a shared result can be viewed without
-/// its frames: the canonical frame's points, flat xyz (other readers ignore it).
-const POINTS_KEY: &str = "canonical_points";
 
 #[wasm_bindgen]
 impl Model {
     /// Opens a result JSON (format `gsart-result`, version 1). `file` names it in errors.
     pub fn from_json(text: &str, file: &str) -> Result<Model, JsError> {
         let result = FitResult::from_json(text, file).map_err(js_err)?;
-        let mut canonical_points = None;
-        if let Ok(value) = serde_json::from_str::<serde_json::Value>(text) {
-            if let Some(arr) = value.get(POINTS_KEY).and_then(|v| v.as_array()) {
-                let flat: Vec<f32> = arr
-                    .iter()
-                    .filter_map(|v| v.as_f64())
-                    .map(|v| v as f32)
-                    .collect();
-                let n = result.labels[result.canonical_frame].len();
-                if flat.len() != arr.len() || flat.len() != 3 * n {
-                    return Err(js_err(crate::Error::input(
-                        file,
-                        format!("{POINTS_KEY} has {} numbers, expected 3 × {n}", arr.len()),
-                    )));
-                }
-                canonical_points = Some(points_from_flat(&flat, file)?);
+        let c = result.canonical_frame;
+        let canonical_points = match &result.points {
+            Some(pts) if pts.len() == result.labels[c].len() => {
+                Some(pts.iter().map(|p| Vec3::from_array(*p)).collect())
             }
-        }
+            Some(pts) => {
+                return Err(js_err(crate::Error::input(
+                    file,
+                    format!(
+                        "`points` has {} entries but labels[{c}] has {}",
+                        pts.len(),
+                        result.labels[c].len()
+                    ),
+                )))
+            }
+            None => None,
+        };
         Model::new(result, canonical_points, file)
     }
 
@@ -392,32 +526,37 @@ impl Model {
         Ok(out.into())
     }
 
-    /// The result JSON; with `with_points`, the canonical frame's points are added under
-    /// `canonical_points` so the file opens on its own (`?model=URL`).
-    pub fn to_json(&self, with_points: bool) -> Result<String, JsError> {
-        let text = self.result.to_json();
-        if !with_points {
-            return Ok(text);
-        }
+    /// The result JSON; with `with_points`, the canonical frame's points are included
+    /// (key `points`) so the file opens on its own (`?model=URL`).
+    pub fn to_json(&self, with_points: bool) -> String {
         let c = self.result.canonical_frame;
-        let Some(points) = self.frame_points[c]
+        let points = self.frame_points[c]
             .as_ref()
-            .or(self.canonical_points.as_ref())
-        else {
-            return Ok(text);
-        };
-        let mut value: serde_json::Value = serde_json::from_str(&text)
-            .map_err(|e| JsError::new(&format!("internal: result JSON: {e}")))?;
-        // 1e-6 of the object's size is far below any sensor noise and keeps files small.
-        let round = |v: f32| ((v as f64) * 1e6).round() / 1e6;
-        let flat: Vec<f64> = points
-            .iter()
-            .flat_map(|p| [round(p.x), round(p.y), round(p.z)])
-            .collect();
-        if let serde_json::Value::Object(map) = &mut value {
-            map.insert(POINTS_KEY.to_string(), serde_json::json!(flat));
+            .or(self.canonical_points.as_ref());
+        match (with_points, points) {
+            (true, Some(p)) if self.result.points.is_none() => {
+                let mut r = self.result.clone();
+                r.points = Some(p.iter().map(|v| v.to_array()).collect());
+                r.to_json()
+            }
+            (false, _) if self.result.points.is_some() => {
+                let mut r = self.result.clone();
+                r.points = None;
+                r.to_json()
+            }
+            _ => self.result.to_json(),
         }
-        serde_json::to_string(&value).map_err(|e| JsError::new(&format!("internal: {e}")))
+    }
+
+    /// URDF of the model: one link per part (a box around its canonical points),
+    /// joints with axis, origin and limits.
+    pub fn urdf(&self, name: &str) -> Result<String, JsError> {
+        let (points, src) = self.source(self.result.canonical_frame)?;
+        if src != self.result.canonical_frame {
+            return Err(JsError::new("internal: canonical points missing"));
+        }
+        let parts = crate::io::urdf::canonical_part_points(&self.result, points);
+        crate::io::urdf::to_urdf(&self.result, &parts, name).map_err(js_err)
     }
 
     /// Frame k as a binary PLY with `x y z part` (the input points when loaded, else the

@@ -87,14 +87,33 @@ export async function canvasStats(page, selector = '#view') {
   }, png.toString('base64'));
 }
 
-/** Raw RGBA of the canvas (via screenshot) for pixel comparisons. */
-export async function canvasPixels(page, selector = '#view') {
+/** A PNG screenshot of the 3D canvas (works for WebGPU and WebGL2 canvases). */
+export async function canvasPng(page, selector = '#view') {
   return page.locator(selector).screenshot();
 }
 
-export function diffCount(a, b) {
-  // PNG buffers differ if the images differ; compare decoded pixels in the page instead.
-  return Buffer.compare(a, b) === 0 ? 0 : 1;
+/** Number of pixels that differ (any channel by more than `tol`) between two PNGs of equal size. */
+export async function pixelDiff(page, pngA, pngB, tol = 24) {
+  return page.evaluate(async ([a, b, t]) => {
+    const decode = async (b64) => {
+      const img = new Image();
+      img.src = `data:image/png;base64,${b64}`;
+      await img.decode();
+      const c = document.createElement('canvas');
+      c.width = img.width; c.height = img.height;
+      const g = c.getContext('2d');
+      g.drawImage(img, 0, 0);
+      return g.getImageData(0, 0, c.width, c.height);
+    };
+    const A = await decode(a), B = await decode(b);
+    if (A.width !== B.width || A.height !== B.height) return A.width * A.height;
+    let n = 0;
+    for (let i = 0; i < A.data.length; i += 4) {
+      if (Math.abs(A.data[i] - B.data[i]) > t || Math.abs(A.data[i + 1] - B.data[i + 1]) > t
+        || Math.abs(A.data[i + 2] - B.data[i + 2]) > t) n++;
+    }
+    return n;
+  }, [pngA.toString('base64'), pngB.toString('base64'), tol]);
 }
 
 export async function shot(page, name) {

@@ -65,13 +65,7 @@ function fmtTime(s) {
 }
 
 function partColor(p) {
-  const pal = S.palette;
-  if (pal && pal.length >= 3) {
-    const n = pal.length / 3;
-    const i = (p % n) * 3;
-    return `rgb(${pal[i]}, ${pal[i + 1]}, ${pal[i + 2]})`;
-  }
-  return `hsl(${(p * 137.508) % 360} 70% 60%)`;
+  try { return wasm.palette_css(p); } catch { return `hsl(${(p * 137.508) % 360} 70% 60%)`; }
 }
 
 function goodFrames() { return S.frames.filter((f) => f.points && !f.error); }
@@ -116,7 +110,6 @@ async function startView() {
   badge.className = `badge ${b}`;
   badge.title = b === 'webgpu' ? 'Drawing with WebGPU' : 'Drawing with WebGL2 (this browser has no usable WebGPU)';
   document.body.dataset.backend = b;
-  try { S.palette = wasm.part_palette?.(64) ?? null; } catch { S.palette = null; }
   S.view.onCamera = (state) => writeHash(state);
   S.view.setGaussiansVisible(S.gaussiansOn);
 }
@@ -143,6 +136,7 @@ function resetResult() {
   if (S.model) { try { S.model.free(); } catch { /* already freed */ } }
   S.model = null;
   S.metrics = null;
+  S.metricsError = null;
   S.modelUrl = null;
   $('explore').hidden = true;
   $('explore-empty').hidden = false;
@@ -204,18 +198,6 @@ async function loadSequence({ name, files, gt = null, heldout = [], example = nu
     return;
   }
   if (token !== S.loadToken) return;
-  if (heldout.length && gt) {
-    const hb = await Promise.all(heldout.map((f) => f.file.arrayBuffer()));
-    const parsed = [];
-    const hj = new WorkerJob({ type: 'parse', files: heldout.map((f, i) => ({ name: f.name, bytes: hb[i] })) }, hb,
-      (msg) => { if (msg.type === 'parsed' && !msg.error) parsed.push(msg); });
-    try { await hj.promise; } catch { /* metrics will say held-out poses are missing */ }
-    if (token !== S.loadToken) return;
-    let ho = parsed.map((p) => p.name);
-    try { ho = Array.from(wasm.natural_order(ho)).map((i) => parsed[i].name); } catch { /* keep */ }
-    const byName = new Map(parsed.map((p) => [p.name, p]));
-    S.heldout = { names: ho, frames: ho.map((n) => byName.get(n).points) };
-  }
   afterLoad(note);
 }
 
@@ -358,7 +340,6 @@ async function loadExample(name) {
   S.seqName = `${name} (example)`;
   S.example = name;
   S.gt = ex.gt;
-  S.heldout = ex.heldout.length ? { frames: ex.heldout.map((f) => f.points), names: ex.heldout.map((f) => f.name) } : null;
   S.frames = ex.frames.map((f) => ({ name: f.name, points: f.points, labels: f.labels ?? null, error: null, status: null }));
   S.current = 0;
   const url = new URL(location.href);
@@ -550,9 +531,10 @@ async function startFit() {
   try { ({ opts, range } = readOptions()); } catch (e) { toast(errText(e), 'error'); return; }
   stopPlay();
   resetResult();
-  const gtOk = S.gt && good.length === S.frames.length;
+  const gtOk = S.gt && good.length === S.frames.length && good.every((f) => f.labels);
   buildStages(!!gtOk);
   $('progress').hidden = false;
+  $('step-fit').scrollIntoView({ block: 'start', behavior: 'smooth' });
   S.chart.clear('Step 1 loss');
   fitUi(true);
   setStepActive('step-fit');
@@ -583,7 +565,8 @@ async function startFit() {
     options: opts,
     range,
     gt: gtOk ? S.gt : null,
-    heldout: gtOk ? S.heldout : null,
+    labels: gtOk ? good.map((f) => f.labels) : null,
+    bestOf: (ms, losses) => wasm.best_candidate(Uint32Array.from(ms), Float64Array.from(losses)),
     callbacks: {
       onCandidateStart: (m) => {
         cands.set(m, { iter: 0, total: totalGuess, done: false });
@@ -644,12 +627,10 @@ async function startFit() {
   fitUi(false);
   for (const st of STAGES) if (S.stageEls[st.key]) setStage(st.key, 1);
   const secs = (performance.now() - t0) / 1000;
-  const best = out.candidates.length ? out.candidates.reduce((a, b) => (b.loss < a.loss ? b : a)) : null;
+  const best = out.candidates.find((c) => c.m === out.best) ?? null;
   $('fit-status').innerHTML = `<span class="msg-good">Done in ${fmtTime(secs)}.</span>`
     + (out.candidates.length > 1 ? ` Tried m = ${out.candidates.map((c) => c.m).join(', ')}.` : '');
-  S.metrics = out.metrics;
-  S.metricsError = out.metricsError;
-  openResult(out.result, S.seqName, 'fit', { seconds: secs, best });
+  openResult(out.result, S.seqName, 'fit', { seconds: secs, best, metrics: out.metrics, metricsError: out.metricsError });
 }
 
 function showSnapshot(m, snap) {
@@ -675,6 +656,8 @@ function openResult(text, source, how, extra = {}) {
   resetResult();
   S.model = model;
   S.modelSource = how;
+  S.metrics = extra.metrics ?? null;
+  S.metricsError = extra.metricsError ?? null;
   // Points: the loaded frames when they match the result, else the points the file carries.
   const good = goodFrames();
   let attached = false;
@@ -700,6 +683,7 @@ function openResult(text, source, how, extra = {}) {
   showFrame(Math.min(S.current, model.frames() - 1), { frameBox: how !== 'fit' });
   if (how !== 'fit') applyHashCamera();
   setStepActive('step-explore');
+  $('step-explore').scrollIntoView({ block: 'start', behavior: 'smooth' });
   return true;
 }
 
@@ -717,9 +701,8 @@ function renderResult(extra = {}) {
   const info = m.info();
   const notes = [];
   if (extra.best) notes.push(`chosen m = ${extra.best.m} Gaussians`);
-  if (info && typeof info === 'object') {
-    if (info.occlusion_used) notes.push(`occlusion handling ${info.occlusion_used}`);
-    if (info.downsampled) notes.push(String(info.downsampled));
+  if (info && typeof info === 'object' && Array.isArray(info.notes)) {
+    for (const n of info.notes) if (!/^model selection/.test(n) || !extra.best) notes.push(String(n));
   }
   if (notes.length) html += `<br><span class="muted">${escapeHtml(notes.join(' · '))}</span>`;
   $('result-summary').innerHTML = html;
@@ -829,8 +812,8 @@ function highlightPart(p) {
 const METRIC_LABELS = [
   ['reconstruction_error', 'Reconstruction error', '×100, lower is better'],
   ['flow_error', 'Flow error (EPE)', '×100, lower is better'],
-  ['mean_rand_index', 'Rand index (mean over frames)', 'higher is better'],
-  ['rand_index_canonical', 'Rand index (canonical frame)', 'higher is better'],
+  ['mean_ri', 'Rand index (mean over frames)', 'higher is better'],
+  ['canonical_ri', 'Rand index (canonical frame)', 'higher is better'],
   ['tree_edit_distance', 'Tree edit distance', 'lower is better'],
   ['reanimation_error', 'Re-animation error', '×100, lower is better'],
 ];
@@ -864,6 +847,15 @@ function renderMetrics() {
   for (const [k, v] of Object.entries(mt)) {
     if (seen.has(k) || v === null || typeof v === 'object') continue;
     row(k.replace(/_/g, ' '), '', v);
+  }
+  for (const n of Array.isArray(mt.notes) ? mt.notes : []) {
+    const tr = document.createElement('tr');
+    const td = document.createElement('td');
+    td.colSpan = 2;
+    td.className = 'hint';
+    td.textContent = n;
+    tr.appendChild(td);
+    t.appendChild(tr);
   }
 }
 

@@ -7,34 +7,61 @@
 const WORKER_URL = new URL('../worker.js', import.meta.url);
 let nextId = 1;
 
-/** Runs one message in a worker; resolves with the 'result' message. */
+/**
+ * A module worker that runs jobs one after another (a Step-1 candidate stays in its
+ * wasm memory, so the worker holding the best one goes on with Steps 2–3).
+ */
+export class Lane {
+  constructor() {
+    this.worker = new Worker(WORKER_URL, { type: 'module' });
+    this.current = null; // {id, resolve, reject, onMessage}
+    this.dead = false;
+    this.worker.onmessage = (ev) => {
+      const m = ev.data;
+      const cur = this.current;
+      if (!cur || m.id !== cur.id) return;
+      if (m.type === 'result') { this.current = null; cur.resolve(m); }
+      else if (m.type === 'error') { this.current = null; cur.reject(new Error(m.message)); }
+      else cur.onMessage(m);
+    };
+    this.worker.onerror = (ev) => {
+      ev.preventDefault?.();
+      this.fail(new Error(ev.message || 'the worker failed to start (is www/pkg built?)'));
+    };
+    this.worker.onmessageerror = () => this.fail(new Error('a worker message could not be read'));
+  }
+
+  run(msg, transfer = [], onMessage = () => {}) {
+    if (this.dead) return Promise.reject(new CancelledError());
+    if (this.current) return Promise.reject(new Error('internal: the worker is busy'));
+    const id = nextId++;
+    return new Promise((resolve, reject) => {
+      this.current = { id, resolve, reject, onMessage };
+      this.worker.postMessage({ id, ...msg }, transfer);
+    });
+  }
+
+  fail(err) {
+    const cur = this.current;
+    this.current = null;
+    this.terminate();
+    cur?.reject(err);
+  }
+
+  terminate() {
+    if (!this.dead) { this.dead = true; this.worker.terminate(); }
+  }
+
+  cancel() { this.fail(new CancelledError()); }
+}
+
+/** Runs one message in a fresh worker; resolves with the 'result' message. */
 export class WorkerJob {
   constructor(msg, transfer = [], onMessage = () => {}) {
-    this.worker = new Worker(WORKER_URL, { type: 'module' });
-    this.id = nextId++;
-    this.done = false;
-    this.promise = new Promise((resolve, reject) => {
-      this.reject = reject;
-      this.worker.onmessage = (ev) => {
-        const m = ev.data;
-        if (m.type === 'result') { this.finish(); resolve(m); }
-        else if (m.type === 'error') { this.finish(); reject(new Error(m.message)); }
-        else onMessage(m);
-      };
-      this.worker.onerror = (ev) => {
-        this.finish();
-        reject(new Error(ev.message || 'the worker failed to start (is www/pkg built?)'));
-      };
-      this.worker.onmessageerror = () => { this.finish(); reject(new Error('a worker message could not be read')); };
-    });
-    this.worker.postMessage({ id: this.id, ...msg }, transfer);
+    this.lane = new Lane();
+    this.promise = this.lane.run(msg, transfer, onMessage).finally(() => this.lane.terminate());
   }
-  finish() {
-    if (!this.done) { this.done = true; this.worker.terminate(); }
-  }
-  cancel() {
-    if (!this.done) { this.finish(); this.reject(new CancelledError()); }
-  }
+  cancel() { this.lane.cancel(); }
 }
 
 export class CancelledError extends Error {
@@ -53,21 +80,22 @@ export function maxParallel() {
 
 /**
  * Runs a whole fit. Callbacks:
- *   onCandidateProgress(m, progressMsg), onWorking(m, frames), onCandidateDone(m, info),
- *   onFinishProgress(progressMsg)
- * Resolves with {result, metrics, metricsError, candidates: [{m, loss, ms}]}.
+ *   onCandidateStart(m), onWorking(m, frames), onCandidateProgress(m, msg),
+ *   onCandidateDone(m, {loss, ms}), onFinishProgress(msg)
+ * Resolves with {result, metrics, metricsError, candidates: [{m, loss, ms}], best}.
  */
 export class FitJob {
-  constructor({ frames, names, options, range, gt, heldout, callbacks }) {
+  constructor({ frames, names, options, range, gt, labels, bestOf, callbacks }) {
     this.frames = frames;
     this.names = names;
     this.options = options;
     this.ms = [];
     for (let m = range[0]; m <= range[1]; m++) this.ms.push(m);
     this.gt = gt;
-    this.heldout = heldout;
+    this.labels = labels;
+    this.bestOf = bestOf;
     this.cb = callbacks;
-    this.jobs = new Set();
+    this.lanes = [];
     this.cancelled = false;
     this.parallel = Math.min(maxParallel(), this.ms.length);
   }
@@ -75,11 +103,13 @@ export class FitJob {
   async run() {
     const queue = [...this.ms];
     const done = [];
-    const runOne = async () => {
+    const owner = new Map(); // m -> lane holding its candidate
+    const runLane = async (lane) => {
       while (queue.length && !this.cancelled) {
         const m = queue.shift();
         const { arrays, transfer } = copies(this.frames);
-        const job = new WorkerJob(
+        this.cb.onCandidateStart?.(m);
+        const r = await lane.run(
           { type: 'start', frames: arrays, names: this.names, m, options: this.options },
           transfer,
           (msg) => {
@@ -87,55 +117,39 @@ export class FitJob {
             else if (msg.type === 'working') this.cb.onWorking?.(m, msg.frames);
           },
         );
-        this.jobs.add(job);
-        this.cb.onCandidateStart?.(m);
-        try {
-          const r = await job.promise;
-          done.push({ m, json: r.candidate, loss: r.loss, ms: r.ms });
-          this.cb.onCandidateDone?.(m, { loss: r.loss, ms: r.ms });
-        } finally {
-          this.jobs.delete(job);
-        }
+        done.push({ m, loss: r.loss, ms: r.ms });
+        owner.set(m, lane);
+        this.cb.onCandidateDone?.(m, { loss: r.loss, ms: r.ms });
       }
     };
-    const lanes = [];
-    for (let i = 0; i < this.parallel; i++) lanes.push(runOne());
+    for (let i = 0; i < this.parallel; i++) this.lanes.push(new Lane());
     try {
-      await Promise.all(lanes);
-    } catch (e) {
-      this.cancel();
-      throw e;
-    }
-    if (this.cancelled) throw new CancelledError();
-    done.sort((a, b) => a.m - b.m);
-
-    const { arrays, transfer } = copies(this.frames);
-    const heldout = this.heldout
-      ? { frames: this.heldout.frames.map((f) => f.slice()), names: this.heldout.names }
-      : null;
-    const job = new WorkerJob(
-      {
-        type: 'finish', frames: arrays, names: this.names, options: this.options,
-        candidates: done.map((c) => c.json), gt: this.gt ?? null, heldout,
-      },
-      transfer,
-      (msg) => { if (msg.type === 'progress') this.cb.onFinishProgress?.(msg); },
-    );
-    this.jobs.add(job);
-    try {
-      const r = await job.promise;
+      await Promise.all(this.lanes.map(runLane));
+      if (this.cancelled) throw new CancelledError();
+      done.sort((a, b) => a.m - b.m);
+      const best = this.bestOf(done.map((c) => c.m), done.map((c) => c.loss));
+      const lane = owner.get(best);
+      for (const l of this.lanes) if (l !== lane) l.terminate();
+      const { arrays, transfer } = copies(this.frames);
+      const r = await lane.run(
+        {
+          type: 'finish', m: best, frames: arrays, names: this.names, options: this.options,
+          candidates: done.map((c) => [c.m, c.loss]), gt: this.gt ?? null, labels: this.gt ? this.labels : null,
+        },
+        transfer,
+        (msg) => { if (msg.type === 'progress') this.cb.onFinishProgress?.(msg); },
+      );
       return {
         result: r.result, metrics: r.metrics, metricsError: r.metricsError,
-        candidates: done.map(({ m, loss, ms }) => ({ m, loss, ms })), finishMs: r.ms,
+        candidates: done, best, finishMs: r.ms,
       };
     } finally {
-      this.jobs.delete(job);
+      for (const l of this.lanes) l.terminate();
     }
   }
 
   cancel() {
     this.cancelled = true;
-    for (const j of this.jobs) j.cancel();
-    this.jobs.clear();
+    for (const l of this.lanes) l.cancel();
   }
 }

@@ -2,8 +2,6 @@
 // WebGL2 otherwise), forwards pointer/wheel input, renders on demand (one
 // requestAnimationFrame per change), and keeps the camera in the URL hash.
 
-const NEUTRAL = [0x9f, 0xb4, 0xd8];
-
 export class View {
   /** @returns {Promise<View>} */
   static async create(canvas, wasm, { forceWebgl = false } = {}) {
@@ -40,9 +38,9 @@ export class View {
       const [x, y] = pos(e);
       if (this.viewer.pointer_move(e.pointerId, x, y)) { this.request(); this.cameraMoved(); }
     });
-    const up = (e) => { this.viewer.pointer_up(e.pointerId); };
-    c.addEventListener('pointerup', up);
-    c.addEventListener('pointercancel', up);
+    c.addEventListener('pointerup', (e) => this.viewer.pointer_up(e.pointerId));
+    c.addEventListener('pointercancel', () => this.viewer.pointer_cancel());
+    c.addEventListener('blur', () => this.viewer.pointer_cancel());
     c.addEventListener('contextmenu', (e) => e.preventDefault());
     c.addEventListener('wheel', (e) => {
       e.preventDefault();
@@ -85,15 +83,11 @@ export class View {
     }
   }
 
-  /** Points coloured by part (labels) or, without labels, a neutral height tint. */
+  /** Points coloured by part (labels) or, without labels, plain (before a fit). */
   setPoints(points, labels, { frameBox = false } = {}) {
     const n = points.length / 3;
-    if (labels) {
-      this.viewer.set_points(points, labels);
-    } else {
-      this.viewer.set_points(points, new Uint32Array(n));
-      this.viewer.set_point_colors(neutralColors(points));
-    }
+    this.viewer.set_points(points, labels ?? new Uint32Array(0));
+    this.viewer.set_color_mode(labels ? 0 : 2);
     if (frameBox || !this.hasContent) this.viewer.frame_object();
     this.hasContent = n > 0;
     this.request();
@@ -147,22 +141,4 @@ export class View {
     this.renderNow();
     return await new Promise((res) => this.canvas.toBlob(res, 'image/png'));
   }
-}
-
-/** Light blue-grey tint by height (y), so the shape reads before a fit. */
-export function neutralColors(points) {
-  const n = points.length / 3;
-  let lo = Infinity, hi = -Infinity;
-  for (let i = 0; i < n; i++) { const y = points[3 * i + 1]; if (y < lo) lo = y; if (y > hi) hi = y; }
-  const span = hi - lo || 1;
-  const out = new Uint8Array(n * 4);
-  for (let i = 0; i < n; i++) {
-    const t = (points[3 * i + 1] - lo) / span;
-    const s = 0.72 + 0.28 * t;
-    out[4 * i] = NEUTRAL[0] * s;
-    out[4 * i + 1] = NEUTRAL[1] * s;
-    out[4 * i + 2] = Math.min(255, NEUTRAL[2] * s + 20);
-    out[4 * i + 3] = 255;
-  }
-  return out;
 }

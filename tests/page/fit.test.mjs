@@ -1,0 +1,154 @@
+// The whole product flow on a built-in example with the fast preset: fit (progress,
+// live Gaussians), results (tree, joints, metrics), a slider re-poses the model,
+// exports (JSON, PLY zip, URDF), and the exported JSON opens again (file and ?model=URL).
+// Also: cancelling a fit leaves the page usable with the frames loaded.
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import fs from 'node:fs';
+import path from 'node:path';
+import { startServer, launch, newPage, waitLoaded, canvasStats, canvasPng, pixelDiff, shot, ARTIFACTS } from './helpers.mjs';
+
+let srv, browser;
+before(async () => { srv = await startServer(); browser = await launch(); });
+after(async () => { await browser?.close(); srv?.server.close(); });
+
+const FIT_TIMEOUT = 20 * 60_000;
+let exported = null; // path of the exported result JSON
+
+async function download(page, button) {
+  const [dl] = await Promise.all([page.waitForEvent('download'), page.locator(button).click()]);
+  const file = path.join(ARTIFACTS, `export-${dl.suggestedFilename()}`);
+  await dl.saveAs(file);
+  return file;
+}
+
+test('fit an example end to end (fast), explore, re-pose, export', { timeout: FIT_TIMEOUT }, async () => {
+  const { page, errors, context } = await newPage(browser);
+  await page.goto(`${srv.base}/?example=laptop`);
+  await waitLoaded(page);
+  await page.locator('label:has(input[value=fast])').click();
+  // A manual part range (the laptop has 2 parts) keeps the test short.
+  await page.getByLabel('Automatic part range').uncheck();
+  await page.getByLabel('Minimum part count').fill('2');
+  await page.getByLabel('Maximum part count').fill('4');
+  await page.locator('#btn-fit').click();
+  assert.equal(await page.locator('#btn-cancel').isVisible(), true);
+  assert.equal(await page.locator('#progress').isVisible(), true);
+  // The Gaussians move in the view while Step 1 runs.
+  await page.waitForFunction(() => /running|left/.test(document.querySelector('#stage-list').innerText), null, { timeout: 120_000 });
+  assert.match(await page.locator('#fit-status').innerText(), /m = 2…4/);
+  await page.waitForTimeout(1500);
+  const a = await canvasPng(page);
+  await page.waitForTimeout(1500);
+  const b = await canvasPng(page);
+  await shot(page, 'fit-running');
+  const moving = await pixelDiff(page, a, b);
+  await page.waitForSelector('#explore:not([hidden])', { timeout: FIT_TIMEOUT });
+  assert.ok(moving > 0, 'the view updates during the fit');
+  await page.waitForTimeout(400);
+  await shot(page, 'fit-done');
+
+  // Results: tree diagram, joints with sliders, metrics (the example has ground truth).
+  const nodes = await page.locator('#tree .node').count();
+  assert.ok(nodes >= 2, `tree has ${nodes} nodes`);
+  const sliders = page.locator('#joint-list input[type=range]');
+  assert.ok(await sliders.count() >= 1, 'at least one joint slider');
+  assert.equal(await page.locator('#metrics-wrap').isVisible(), true);
+  assert.match(await page.locator('#metrics').innerText(), /Rand index/i);
+  const st = await canvasStats(page);
+  assert.ok(st.lit > 500, 'points coloured by part are drawn');
+
+  // A slider re-poses the model live.
+  const before = await canvasPng(page);
+  await sliders.first().evaluate((el) => { el.value = el.max; el.dispatchEvent(new Event('input', { bubbles: true })); });
+  await page.waitForTimeout(400);
+  const after = await canvasPng(page);
+  const changed = await pixelDiff(page, before, after);
+  assert.ok(changed > 100, `moving a joint slider changes the view (${changed} pixels)`);
+  assert.match(await page.locator('#hud-sub').innerText(), /re-posed/);
+  await shot(page, 'fit-reposed');
+
+  // Exports.
+  exported = await download(page, '#btn-export-json');
+  const json = JSON.parse(fs.readFileSync(exported, 'utf8'));
+  assert.equal(json.format, 'gsart-result');
+  assert.equal(json.version, 1);
+  assert.equal(json.frames, json.labels.length);
+  assert.ok(Array.isArray(json.joints) && json.joints.length >= 1);
+  assert.ok(Array.isArray(json.points), 'the export carries the canonical points');
+  const zipFile = await download(page, '#btn-export-ply');
+  const zip = fs.readFileSync(zipFile);
+  assert.equal(zip.subarray(0, 2).toString(), 'PK');
+  assert.ok(zip.includes(Buffer.from('property int part')), 'segmented PLY frames have a part property');
+  const urdf = fs.readFileSync(await download(page, '#btn-export-urdf'), 'utf8');
+  assert.match(urdf, /<robot[\s\S]*<joint[\s\S]*<axis/);
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
+test('an exported result opens again from a file and from ?model=URL', { timeout: 120_000 }, async (t) => {
+  if (!exported) { t.skip('needs the export of the previous test'); return; }
+  const text = fs.readFileSync(exported, 'utf8');
+  const njoints = JSON.parse(text).joints.length;
+  {
+    const { page, errors, context } = await newPage(browser);
+    await page.goto(`${srv.base}/`);
+    await waitLoaded(page);
+    await page.locator('#file-input').setInputFiles(exported);
+    await page.waitForSelector('#explore:not([hidden])');
+    assert.equal(await page.locator('#joint-list input[type=range]').count(), njoints);
+    await page.waitForTimeout(300);
+    assert.ok((await canvasStats(page)).lit > 500, 'the shared result shows its points');
+    const before = await canvasPng(page);
+    await page.locator('#joint-list input[type=range]').first()
+      .evaluate((el) => { el.value = el.min; el.dispatchEvent(new Event('input', { bubbles: true })); });
+    await page.waitForTimeout(300);
+    assert.ok(await pixelDiff(page, before, await canvasPng(page)) > 100, 'its sliders work');
+    assert.deepEqual(errors, []);
+    await context.close();
+  }
+  {
+    const { page, errors, context } = await newPage(browser);
+    await page.route('**/shared/model.json', (r) => r.fulfill({ body: text, contentType: 'application/json' }));
+    await page.goto(`${srv.base}/?model=/shared/model.json`);
+    await waitLoaded(page);
+    await page.waitForSelector('#explore:not([hidden])');
+    assert.equal(await page.locator('#joint-list input[type=range]').count(), njoints);
+    assert.ok((await canvasStats(page)).lit > 500);
+    await shot(page, 'model-url');
+    assert.deepEqual(errors, []);
+    await context.close();
+  }
+});
+
+test('a result JSON that is not valid shows an error', async () => {
+  const { page, context } = await newPage(browser);
+  await page.goto(`${srv.base}/`);
+  await waitLoaded(page);
+  await page.locator('#file-input').setInputFiles({ name: 'bad.json', mimeType: 'application/json', buffer: Buffer.from('{"format":"gsart-result","version":7}') });
+  await page.waitForSelector('#toast:not([hidden])');
+  assert.match(await page.locator('#toast').innerText(), /bad\.json/);
+  assert.equal(await page.locator('#explore').isVisible(), false);
+  await context.close();
+});
+
+test('cancelling a fit keeps the page usable with the frames loaded', { timeout: 180_000 }, async () => {
+  const { page, errors, context } = await newPage(browser);
+  await page.goto(`${srv.base}/?example=cabinet`);
+  await waitLoaded(page);
+  const n = await page.locator('#frame-list li').count();
+  await page.locator('#btn-fit').click();
+  await page.waitForFunction(() => /running|left|starting/.test(document.querySelector('#stage-list').innerText));
+  await page.waitForTimeout(1000);
+  await page.locator('#btn-cancel').click();
+  assert.match(await page.locator('#fit-status').innerText(), /Cancelled/);
+  assert.equal(await page.locator('#btn-fit').isVisible(), true);
+  assert.equal(await page.locator('#btn-fit').isDisabled(), false);
+  assert.equal(await page.locator('#frame-list li').count(), n, 'the frames are still loaded');
+  await page.waitForTimeout(300);
+  assert.ok((await canvasStats(page)).lit > 500, 'the frames are still drawn');
+  await page.keyboard.press('ArrowRight');
+  assert.equal((await page.locator('#frame-label').innerText()).trim().split(' ')[0], '2');
+  assert.deepEqual(errors, []);
+  await context.close();
+});

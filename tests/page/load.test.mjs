@@ -1,0 +1,104 @@
+// Loading real files: a bench-dev sequence through the file input, a folder drop,
+// and bad files (each shows its error beside it, the good ones stay loaded).
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import fs from 'node:fs';
+import os from 'node:os';
+import path from 'node:path';
+import { startServer, launch, newPage, waitLoaded, canvasStats, shot, benchDev } from './helpers.mjs';
+
+let srv, browser;
+before(async () => { srv = await startServer(); browser = await launch(); });
+after(async () => { await browser?.close(); srv?.server.close(); });
+
+const BENCH = benchDev();
+const SEQ = BENCH && path.join(BENCH, 'full', 'finger_edu_00');
+
+test('loads a bench-dev sequence through the file input', { skip: !SEQ && 'bench-dev not found (set GSART_BENCH_DEV)' }, async () => {
+  const { page, errors, context } = await newPage(browser);
+  await page.goto(`${srv.base}/`);
+  await waitLoaded(page);
+  const files = fs.readdirSync(SEQ).filter((f) => /^frame_\d+\.ply$/.test(f)).map((f) => path.join(SEQ, f));
+  assert.ok(files.length >= 2);
+  // Reverse the order: the page must sort them naturally.
+  await page.locator('#file-input').setInputFiles(files.reverse());
+  await page.waitForFunction((n) => document.querySelectorAll('#frame-list li[data-index]').length === n, files.length);
+  const names = await page.locator('#frame-list .fname').allInnerTexts();
+  assert.deepEqual(names, [...names].sort(), 'frames are listed in filename order');
+  assert.equal(names[0], 'frame_000.ply');
+  assert.match(await page.locator('#frame-list li').first().innerText(), /4,096 pts/);
+  assert.match(await page.locator('#sequence-summary').innerText(), new RegExp(`${files.length} frames`));
+  assert.equal(await page.locator('#btn-fit').isDisabled(), false);
+  await page.waitForTimeout(400);
+  const st = await canvasStats(page);
+  assert.ok(st.lit > 300, `points drawn (${st.lit} lit pixels)`);
+  await shot(page, 'load-finger-edu');
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
+test('a folder drop loads frames and gt.json, not heldout/', { skip: !SEQ && 'bench-dev not found' }, async () => {
+  const { page, errors, context } = await newPage(browser);
+  await page.goto(`${srv.base}/`);
+  await waitLoaded(page);
+  // The folder picker gives files with relative paths, like a dropped folder.
+  await page.locator('#folder-input').setInputFiles(SEQ);
+  await page.waitForFunction(() => document.querySelectorAll('#frame-list li[data-index]').length >= 2);
+  await page.waitForFunction(() => !/reading/.test(document.querySelector('#sequence-summary').innerText));
+  const n = await page.locator('#frame-list li').count();
+  const expected = fs.readdirSync(SEQ).filter((f) => f.endsWith('.ply')).length;
+  assert.equal(n, expected, 'only the frames of the folder, not heldout/');
+  assert.match(await page.locator('#sequence-summary').innerText(), /ground truth/);
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
+test('bad files show their error beside them and the others stay loaded', async () => {
+  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'gsart-bad-'));
+  const good = (i, dx) => {
+    const lines = [];
+    for (let k = 0; k < 200; k++) {
+      const t = k / 200;
+      lines.push(`${(Math.cos(9 * t) + dx).toFixed(4)} ${Math.sin(7 * t).toFixed(4)} ${(t * 2 - 1).toFixed(4)}`);
+    }
+    const body = `ply\nformat ascii 1.0\nelement vertex ${lines.length}\nproperty float x\nproperty float y\nproperty float z\nend_header\n${lines.join('\n')}\n`;
+    fs.writeFileSync(path.join(dir, `f${i}.ply`), body);
+  };
+  good(1, 0); good(2, 0.1); good(10, 0.2);
+  // Truncated binary body.
+  const hdr = 'ply\nformat binary_little_endian 1.0\nelement vertex 100\nproperty float x\nproperty float y\nproperty float z\nend_header\n';
+  fs.writeFileSync(path.join(dir, 'f3.ply'), Buffer.concat([Buffer.from(hdr), Buffer.alloc(100)]));
+  // A zip where a PLY was expected.
+  fs.writeFileSync(path.join(dir, 'scan.zip'), Buffer.from('504b0304140000000800', 'hex'));
+  const { page, errors, context } = await newPage(browser);
+  await page.goto(`${srv.base}/`);
+  await waitLoaded(page);
+  await page.locator('#file-input').setInputFiles(['f1.ply', 'f10.ply', 'f2.ply', 'f3.ply', 'scan.zip'].map((f) => path.join(dir, f)));
+  await page.waitForFunction(() => document.querySelectorAll('#frame-list .ferror').length === 2, null, { timeout: 20_000 });
+  const rows = await page.locator('#frame-list li').allInnerTexts();
+  const byName = Object.fromEntries(rows.map((r) => [r.split('\n')[0].trim(), r]));
+  assert.match(byName['f3.ply'], /truncat|end of file|expected|short/i, `truncated body explained: ${byName['f3.ply']}`);
+  assert.match(byName['scan.zip'], /zip|not a PLY/i, `zip explained: ${byName['scan.zip']}`);
+  // Natural order of the good frames, counts shown.
+  const goodNames = await page.locator('#frame-list li[data-index] .fname').allInnerTexts();
+  assert.deepEqual(goodNames, ['f1.ply', 'f2.ply', 'f10.ply']);
+  assert.match(await page.locator('#sequence-summary').innerText(), /3 frames[\s\S]*2 files could not be read/);
+  assert.equal(await page.locator('#btn-fit').isDisabled(), false, 'the good frames can still be fitted');
+  await shot(page, 'load-bad-files');
+  assert.deepEqual(errors, []);
+
+  // Dropping a corrupt file on the page replaces the sequence and shows the error too.
+  await page.evaluate(() => {
+    const dt = new DataTransfer();
+    dt.items.add(new File(['ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n2\n'], 'broken.ply'));
+    const ev = (type) => new DragEvent(type, { dataTransfer: dt, bubbles: true, cancelable: true });
+    window.dispatchEvent(ev('dragenter'));
+    window.dispatchEvent(ev('drop'));
+  });
+  await page.waitForFunction(() => document.querySelectorAll('#frame-list .ferror').length === 1, null, { timeout: 20_000 });
+  assert.match(await page.locator('#frame-list li').first().innerText(), /broken\.ply/);
+  assert.equal(await page.locator('#btn-fit').isDisabled(), true, 'nothing to fit');
+  assert.equal(await page.locator('#drop-overlay').isVisible(), false);
+  assert.deepEqual(errors, []);
+  await context.close();
+});

@@ -1,0 +1,78 @@
+//! The core's checks run inside headless Chromium (included by `wasm_core_page.rs`,
+//! on the page thread, and `wasm_core_worker.rs`, in a dedicated worker): the same
+//! code paths as the native tests, compiled to wasm32.
+
+use glam::Vec3;
+use gsart::eval::rand_index::rand_index;
+use gsart::eval::tree_edit::tree_edit_distance;
+use gsart::io::ply::{read_ply, write_ply};
+use gsart::io::result::FitResult;
+use gsart::kinematics::chain::Chain;
+use gsart::synth::{generate, ObjectKind, SynthOptions};
+use wasm_bindgen_test::wasm_bindgen_test;
+
+#[wasm_bindgen_test]
+fn ply_round_trip_and_errors_in_wasm() {
+    let points: Vec<Vec3> = (0..64)
+        .map(|i| {
+            let t = i as f32 * 0.1;
+            Vec3::new(t.sin(), t.cos(), 0.01 * i as f32 * (i % 3) as f32)
+        })
+        .collect();
+    let labels: Vec<u32> = (0..64).map(|i| (i % 4) as u32).collect();
+    for ascii in [false, true] {
+        let mut bytes = Vec::new();
+        write_ply(&mut bytes, &points, Some(&labels), ascii).unwrap();
+        let cloud = read_ply(&bytes, "round.ply").unwrap();
+        assert_eq!(cloud.points, points);
+        assert_eq!(cloud.labels.as_deref(), Some(&labels[..]));
+        // A truncated body names the file and says what is wrong.
+        let cut = &bytes[..bytes.len() - 20];
+        let err = read_ply(cut, "cut.ply").unwrap_err().to_string();
+        assert!(err.contains("cut.ply"), "{err}");
+    }
+    let err = read_ply(b"PK\x03\x04 not a ply", "archive.zip")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("archive.zip") && err.to_lowercase().contains("zip"),
+        "{err}"
+    );
+}
+
+#[wasm_bindgen_test]
+fn metrics_in_wasm() {
+    assert_eq!(rand_index(&[0, 0, 1, 1], &[5, 5, 7, 7]).unwrap(), 1.0);
+    // one pair of six disagrees: {a,b} together in pred, apart in gt
+    let ri = rand_index(&[0, 0, 1, 1], &[0, 1, 2, 2]).unwrap();
+    assert!((ri - 5.0 / 6.0).abs() < 1e-12, "{ri}");
+    assert_eq!(tree_edit_distance(&[-1, 0, 1], &[-1, 0, 1]).unwrap(), 0);
+    assert_eq!(tree_edit_distance(&[-1, 0, 1], &[-1, 0, 0]).unwrap(), 2);
+}
+
+#[wasm_bindgen_test]
+fn ground_truth_forward_kinematics_in_wasm() {
+    for kind in [ObjectKind::Laptop, ObjectKind::Cabinet, ObjectKind::Arm] {
+        let mut o = SynthOptions::new(kind);
+        o.frames = 4;
+        o.points = 512;
+        let s = generate(&o).unwrap();
+        let labels: Vec<Vec<u32>> = s
+            .sequence
+            .frames
+            .iter()
+            .map(|f| f.labels.clone().unwrap())
+            .collect();
+        let r = FitResult::from_ground_truth(&s.gt, labels, 1).unwrap();
+        let chain = Chain::from_result(&r).unwrap();
+        for k in 0..r.frames {
+            let poses = chain
+                .part_poses(&r.root_pose(k).unwrap(), &r.joint_states(k))
+                .unwrap();
+            for (p, pose) in poses.iter().enumerate() {
+                let want = r.pose(k, p).unwrap();
+                assert!(pose.abs_diff_eq(want, 1e-5), "{kind:?} frame {k} part {p}");
+            }
+        }
+    }
+}
