@@ -51,6 +51,7 @@ fn main() {
     let mut batch: Option<usize> = None;
     let mut emd_n: Option<usize> = None;
     let mut refresh: Option<usize> = None;
+    let mut pose: Option<gsart::fit::pose_init::PoseInitOpts> = Some(Default::default());
     let mut i = 0;
     while i < args.len() {
         let a = args[i].as_str();
@@ -91,6 +92,20 @@ fn main() {
             "--refresh" => refresh = Some(val().parse().expect("refresh")),
             "--flow" => weights.flow = val().parse().expect("flow"),
             "--track" => notrack = false,
+            "--no-pose-init" => pose = None,
+            "--pi-refine" => {
+                pose.get_or_insert_with(Default::default).refine_every =
+                    val().parse().expect("refine")
+            }
+            "--pi-icp" => {
+                pose.get_or_insert_with(Default::default).icp = val().parse().expect("icp")
+            }
+            "--pi-keep" => {
+                pose.get_or_insert_with(Default::default).keep = val().parse().expect("keep")
+            }
+            "--pi-flow-n" => {
+                pose.get_or_insert_with(Default::default).flow_n = val().parse().expect("n")
+            }
             "--with-flow" => with_flow = true,
             "--sep" => weights.sep = val().parse().expect("sep"),
             _ => dirs.push(a.to_string()),
@@ -108,6 +123,7 @@ fn main() {
                 let mut cfg = FitConfig::new(prep.sched.clone(), prep.occluded, opts.seed);
                 cfg.weights = weights.clone();
                 cfg.track_init = !notrack;
+                cfg.pose_init = pose;
                 if let Some(v) = lr {
                     cfg.sched.lr = v;
                 }

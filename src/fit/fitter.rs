@@ -12,6 +12,7 @@ use super::flow::SceneFlow;
 use super::gaussians::{Gauss, GradAcc, Params, TransferSrc};
 use super::init;
 use super::losses::{chamfer, emd, flow, mle, sep};
+use super::pose_init::{self, PoseInitOpts};
 use super::schedule::Schedule;
 use crate::geom::assignment::Lap;
 use crate::geom::knn::Grid;
@@ -85,6 +86,11 @@ pub struct FitConfig {
     pub track_init: bool,
     /// MLE iterations per frame in the tracking initialisation.
     pub track_iters: usize,
+    /// Per-frame pose initialisation from tracked correspondences
+    /// (`pose_init::init_poses`); full (non-occluded) input only. None = off.
+    /// On by default: measured (Fast, m = 12, so101/solo12/finger_edu full) mean
+    /// reconstruction error 7.52 → 4.69, flow error 8.16 → 4.55.
+    pub pose_init: Option<PoseInitOpts>,
 }
 
 impl FitConfig {
@@ -97,6 +103,7 @@ impl FitConfig {
             alpha: 0.5,
             track_init: false,
             track_iters: 100,
+            pose_init: Some(PoseInitOpts::default()),
             report_every: 10,
             snapshot_every: 50,
         }
@@ -612,6 +619,9 @@ pub fn fit_candidate(
     if cfg.track_init {
         track_init(data, &mut params, cfg, &mut rng, &mut ws)?;
     }
+    if let (Some(o), false) = (&cfg.pose_init, cfg.occlusion) {
+        pose_init::init_poses(data, &mut params, o, cfg.seed ^ m as u64);
+    }
     adam.reset();
     adam.lr = sched.lr;
     let mut emd_cache: Vec<Option<EmdPair>> = vec![None; if cfg.occlusion { kk } else { kk * kk }];
@@ -624,6 +634,11 @@ pub fn fit_candidate(
     let mut lb = LossesB::default();
     let (mut lm, mut ls) = (0.0, 0.0);
     for it in 0..sched.iters {
+        if let (Some(o), false) = (&cfg.pose_init, cfg.occlusion) {
+            if o.refine_every > 0 && it > 0 && it % o.refine_every == 0 {
+                pose_init::refine_poses(data, &mut params, o);
+            }
+        }
         let k = rng.random_range(0..kk);
         // Step A.
         ws.eval_all(&params);

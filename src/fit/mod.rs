@@ -7,6 +7,7 @@ pub mod flow;
 pub mod gaussians;
 pub mod init;
 pub mod losses;
+pub mod pose_init;
 pub mod rot6d;
 pub mod schedule;
 pub mod select;
