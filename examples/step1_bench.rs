@@ -14,34 +14,11 @@ use gsart::io::gt::GroundTruth;
 use gsart::io::sequence::{Frame, Sequence};
 use gsart::pipeline::{Control, FitOptions, Occlusion, Quality};
 
-/// Fixed bench-dev binary layout (header, then 3×f32 LE + i32 LE per vertex).
 fn read_bench_ply(path: &Path) -> (Vec<Vec3>, Vec<u32>) {
     let bytes = std::fs::read(path).expect("read ply");
-    let hdr_end = bytes
-        .windows(11)
-        .position(|w| w == b"end_header\n")
-        .expect("header")
-        + 11;
-    let header = std::str::from_utf8(&bytes[..hdr_end]).expect("utf8");
-    let n: usize = header
-        .lines()
-        .find_map(|l| {
-            l.strip_prefix("element vertex ")
-                .map(|v| v.trim().parse().expect("count"))
-        })
-        .expect("vertex count");
-    let body = &bytes[hdr_end..];
-    let f = |o: usize| f32::from_le_bytes([body[o], body[o + 1], body[o + 2], body[o + 3]]);
-    let mut pts = Vec::with_capacity(n);
-    let mut lab = Vec::with_capacity(n);
-    for i in 0..n {
-        let o = i * 16;
-        pts.push(Vec3::new(f(o), f(o + 4), f(o + 8)));
-        lab.push(
-            i32::from_le_bytes([body[o + 12], body[o + 13], body[o + 14], body[o + 15]]) as u32,
-        );
-    }
-    (pts, lab)
+    let c = gsart::io::ply::read_ply(&bytes, &path.display().to_string()).expect("ply");
+    let labels = c.labels.expect("part labels");
+    (c.points, labels)
 }
 
 pub fn load(dir: &Path) -> (Sequence, GroundTruth) {
@@ -69,6 +46,7 @@ fn main() {
     let mut fixed_m: Option<usize> = None;
     let mut weights = Weights::default();
     let mut lr: Option<f64> = None;
+    let mut notrack = false;
     let mut batch: Option<usize> = None;
     let mut emd_n: Option<usize> = None;
     let mut refresh: Option<usize> = None;
@@ -111,6 +89,7 @@ fn main() {
             "--emd-n" => emd_n = Some(val().parse().expect("emd-n")),
             "--refresh" => refresh = Some(val().parse().expect("refresh")),
             "--flow" => weights.flow = val().parse().expect("flow"),
+            "--no-track" => notrack = true,
             "--sep" => weights.sep = val().parse().expect("sep"),
             _ => dirs.push(a.to_string()),
         }
@@ -126,6 +105,7 @@ fn main() {
                 let prep = select::prepare(&seq, &opts).expect("prepare");
                 let mut cfg = FitConfig::new(prep.sched.clone(), prep.occluded, opts.seed);
                 cfg.weights = weights.clone();
+                cfg.track_init = !notrack;
                 if let Some(v) = lr {
                     cfg.sched.lr = v;
                 }
@@ -177,7 +157,11 @@ fn main() {
         for k in 0..kk {
             let gl = seq.frames[k].labels.as_ref().expect("labels");
             let gl: Vec<u32> = res.working[k].iter().map(|&j| gl[j as usize]).collect();
-            ri += gsart::eval::rand_index::rand_index(&res.labels[k], &gl).expect("ri");
+            let r = gsart::eval::rand_index::rand_index(&res.labels[k], &gl).expect("ri");
+            if std::env::var("VERBOSE").is_ok() {
+                eprintln!("frame {k}: RI {r:.3}");
+            }
+            ri += r;
         }
         ri /= kk as f64;
         // Reconstruction / flow error on canonical frame 0.
@@ -205,6 +189,9 @@ fn main() {
                 y_t.push(y);
             }
             recon += e / pts.len() as f64;
+            if std::env::var("VERBOSE").is_ok() {
+                eprintln!("frame {t}: recon {:.3}", e / pts.len() as f64 * 100.0);
+            }
             if let Some((pp, yp)) = &prev {
                 let mut f = 0.0;
                 for n in 0..pts.len() {

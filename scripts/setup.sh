@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs everything the project needs, skipping what is already there (idempotent):
 # the wasm32 Rust target, wasm-bindgen-cli pinned to the crate's version, Debian's
-# Chromium + ChromeDriver, and the npm packages (playwright-core, binaryen/wasm-opt).
+# Chromium + ChromeDriver, the npm packages (playwright-core, binaryen/wasm-opt), and
+# yourdfpy from PyPI (the URDF export is checked with a standard parser).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -29,5 +30,9 @@ fi
 if [ ! -d node_modules/playwright-core ] || [ ! -d node_modules/binaryen ] || [ package.json -nt node_modules/.package-lock.json ]; then
   echo "setup: npm packages"
   if [ -f package-lock.json ]; then npm ci --no-audit --no-fund; else npm install --no-audit --no-fund; fi
+fi
+if ! python3 -c "import yourdfpy" >/dev/null 2>&1; then
+  echo "setup: pip install yourdfpy (a standard URDF parser for the URDF export test)"
+  python3 -m pip install --quiet yourdfpy
 fi
 echo "setup: ready"

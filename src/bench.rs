@@ -109,12 +109,17 @@ pub fn run_one(
         })
         .unwrap_or_default();
     per_iter.sort_by(f64::total_cmp);
-    let ms_per_iter = per_iter.get(per_iter.len() / 2).copied().unwrap_or(f64::NAN);
+    let ms_per_iter = per_iter
+        .get(per_iter.len() / 2)
+        .copied()
+        .unwrap_or(f64::NAN);
     let metrics = match gt {
         Some(gt) => Some(pipeline::evaluate(&out.result, seq, gt)?),
         None => None,
     };
-    let range = opts.parts.unwrap_or_else(|| pipeline::default_part_range(seq));
+    let range = opts
+        .parts
+        .unwrap_or_else(|| pipeline::default_part_range(seq));
     Ok(BenchRow {
         name: name.to_string(),
         frames: seq.frames.len(),

@@ -65,18 +65,18 @@ fn check(p: &Params, f: &dyn Fn(&Params, Option<&mut GradAcc>) -> f64, what: &st
     let h = 1e-6;
     let mut worst: f64 = 0.0;
     let mut nonzero = 0;
-    for j in 0..p.x.len() {
+    for (j, &gj) in g.iter().enumerate() {
         let mut a = p.clone();
         a.x[j] += h;
         let mut b = p.clone();
         b.x[j] -= h;
         let fd = (f(&a, None) - f(&b, None)) / (2.0 * h);
-        let err = (fd - g[j]).abs() / fd.abs().max(g[j].abs()).max(1e-6);
+        let err = (fd - gj).abs() / fd.abs().max(gj.abs()).max(1e-6);
         if fd.abs() > 1e-9 {
             nonzero += 1;
         }
         worst = worst.max(err);
-        assert!(err < 1e-3, "{what}: param {j}: fd {fd} analytic {}", g[j]);
+        assert!(err < 1e-3, "{what}: param {j}: fd {fd} analytic {gj}");
     }
     assert!(
         nonzero > 10,

@@ -3,76 +3,15 @@
 //! joint type must be right, axes within 5°, revolute pivots within 2% of the object
 //! size, and no two distinct ground-truth parts may be merged.
 
-use glam::{DMat4, DVec3};
+use glam::DMat4;
 use gsart::io::gt::GroundTruth;
 use gsart::io::result::FitResult;
 use gsart::kinematics::chain::Chain;
-use gsart::kinematics::screw::{axis_angle_deg, point_line_distance};
-use gsart::kinematics::tree::reroot;
 use gsart::kinematics::{build_articulated, KinOptions};
 use gsart::pipeline::Control;
 
 mod kin_common;
-use kin_common::{load, sequences, Seq, BENCH};
-
-struct Errors {
-    tree_mismatch: usize,
-    root: usize,
-    type_errors: usize,
-    max_axis_deg: f64,
-    max_pivot: f64,
-}
-
-fn evaluate(seq: &Seq, res: &FitResult) -> Errors {
-    let gt = &seq.gt;
-    let tree = res.tree.as_ref().unwrap();
-    let gt_rerooted = reroot(&gt.parent, tree.root);
-    let tree_mismatch = gt_rerooted
-        .iter()
-        .zip(&tree.parent)
-        .filter(|(a, b)| a != b)
-        .count();
-    let mut type_errors = 0;
-    let mut max_axis_deg: f64 = 0.0;
-    let mut max_pivot: f64 = 0.0;
-    let c = res.canonical_frame;
-    for j in res.joints.as_ref().unwrap() {
-        // The ground-truth joint of this (undirected) edge.
-        let g = if gt.parent[j.child] == j.parent as i64 {
-            gt.joints[j.child].as_ref()
-        } else if gt.parent[j.parent] == j.child as i64 {
-            gt.joints[j.parent].as_ref()
-        } else {
-            None
-        };
-        let Some(g) = g else { continue };
-        if g.joint_type != j.joint_type {
-            type_errors += 1;
-            continue;
-        }
-        // GT axis/pivot are at frame 0; move them to the canonical frame with the
-        // parent part's motion.
-        let m = gt.poses[c][g.parent_part]
-            * gsart::geom::se3::rigid_inverse(&gt.poses[0][g.parent_part]);
-        let gaxis = m.transform_vector3(g.axis_world_frame0);
-        let gpivot = m.transform_point3(g.pivot_world_frame0);
-        let axis = DVec3::from(j.axis);
-        let pivot = DVec3::from(j.pivot);
-        max_axis_deg = max_axis_deg.max(axis_angle_deg(axis, gaxis));
-        if g.joint_type == gsart::io::gt::JointType::Revolute {
-            let d = point_line_distance(pivot, gpivot, gaxis)
-                .max(point_line_distance(gpivot, pivot, axis));
-            max_pivot = max_pivot.max(d);
-        }
-    }
-    Errors {
-        tree_mismatch,
-        root: tree.root,
-        type_errors,
-        max_axis_deg,
-        max_pivot,
-    }
-}
+use kin_common::{evaluate, load, sequences, Errors, Seq, BENCH};
 
 fn run(seq: &Seq, opts: &KinOptions) -> (FitResult, gsart::kinematics::KinReport, f64) {
     let t0 = std::time::Instant::now();

@@ -16,7 +16,11 @@ mod cli {
     use gsart::{Error, Result};
 
     #[derive(Parser)]
-    #[command(name = "gsart", version, about = "Articulated models from point-cloud sequences (GSArt)")]
+    #[command(
+        name = "gsart",
+        version,
+        about = "Articulated models from point-cloud sequences (GSArt)"
+    )]
     struct Cli {
         #[command(subcommand)]
         command: Command,
@@ -60,10 +64,7 @@ mod cli {
             quiet: bool,
         },
         /// Metrics of a result against a sequence folder's ground truth (gt.json), as JSON.
-        Eval {
-            result: PathBuf,
-            seq_dir: PathBuf,
-        },
+        Eval { result: PathBuf, seq_dir: PathBuf },
         /// Generate a procedural articulated object in the benchmark format.
         Synth {
             /// laptop, cabinet, arm, hand, quadruped, or `all`.
@@ -129,19 +130,48 @@ mod cli {
                 ply_out,
                 urdf,
                 quiet,
-            } => parse_options(parts.as_deref(), iters, &quality, &occlusion, seed, working_size)
-                .and_then(|opts| fit(&input, &out, &opts, ply_out.as_deref(), urdf.as_deref(), quiet)),
+            } => parse_options(
+                parts.as_deref(),
+                iters,
+                &quality,
+                &occlusion,
+                seed,
+                working_size,
+            )
+            .and_then(|opts| {
+                fit(
+                    &input,
+                    &out,
+                    &opts,
+                    ply_out.as_deref(),
+                    urdf.as_deref(),
+                    quiet,
+                )
+            }),
             Command::Eval { result, seq_dir } => eval(&result, &seq_dir),
-            Command::Synth { kind, out, frames, points, heldout, occluded, seed } => {
-                synth(&kind, &out, frames, points, heldout, occluded, seed)
-            }
-            Command::Articulate { result, states, frame, out } => {
-                articulate(&result, &states, frame, &out)
-            }
-            Command::Bench { workload, seq, quality, iters, json } => {
-                parse_options(None, iters, &quality, "auto", 0, 4096)
-                    .and_then(|opts| bench(&workload, &seq, &opts, json.as_deref()))
-            }
+            Command::Synth {
+                kind,
+                out,
+                frames,
+                points,
+                heldout,
+                occluded,
+                seed,
+            } => synth(&kind, &out, frames, points, heldout, occluded, seed),
+            Command::Articulate {
+                result,
+                states,
+                frame,
+                out,
+            } => articulate(&result, &states, frame, &out),
+            Command::Bench {
+                workload,
+                seq,
+                quality,
+                iters,
+                json,
+            } => parse_options(None, iters, &quality, "auto", 0, 4096)
+                .and_then(|opts| bench(&workload, &seq, &opts, json.as_deref())),
         };
         match r {
             Ok(()) => 0,
@@ -165,7 +195,11 @@ mod cli {
             "fast" => Quality::Fast,
             "balanced" => Quality::Balanced,
             "paper" => Quality::Paper,
-            q => return Err(bad(format!("--quality {q}: expected fast, balanced or paper"))),
+            q => {
+                return Err(bad(format!(
+                    "--quality {q}: expected fast, balanced or paper"
+                )))
+            }
         };
         let occlusion = match occlusion {
             "auto" => Occlusion::Auto,
@@ -178,7 +212,9 @@ mod cli {
             Some(s) => {
                 let num = |t: &str| {
                     t.trim().parse::<usize>().map_err(|_| {
-                        bad(format!("--parts {s}: expected a count like 8 or a range like 10..15"))
+                        bad(format!(
+                            "--parts {s}: expected a count like 8 or a range like 10..15"
+                        ))
                     })
                 };
                 let (a, b) = match s.split_once("..") {
@@ -194,7 +230,14 @@ mod cli {
         if working_size < 16 {
             return Err(bad("--working-size must be at least 16".into()));
         }
-        Ok(FitOptions { parts, quality, iters, occlusion, seed, working_size })
+        Ok(FitOptions {
+            parts,
+            quality,
+            iters,
+            occlusion,
+            seed,
+            working_size,
+        })
     }
 
     /// Sequence folder or file list → frames, plus the ground truth when a folder has one.
@@ -244,7 +287,11 @@ mod cli {
 
     impl Bar {
         fn new(quiet: bool) -> Self {
-            Bar { quiet, last: None, start: Instant::now() }
+            Bar {
+                quiet,
+                last: None,
+                start: Instant::now(),
+            }
         }
         fn show(&mut self, p: &Progress) {
             if self.quiet {
@@ -252,15 +299,27 @@ mod cli {
             }
             let now = Instant::now();
             let done = p.stage == Stage::Done;
-            if !done && self.last.is_some_and(|t| now.duration_since(t).as_millis() < 100) {
+            if !done
+                && self
+                    .last
+                    .is_some_and(|t| now.duration_since(t).as_millis() < 100)
+            {
                 return;
             }
             self.last = Some(now);
-            let frac = if p.total > 0 { p.iter as f64 / p.total as f64 } else { 0.0 };
+            let frac = if p.total > 0 {
+                p.iter as f64 / p.total as f64
+            } else {
+                0.0
+            };
             let width = 30;
             let filled = ((frac * width as f64) as usize).min(width);
-            let losses: Vec<String> =
-                p.losses.iter().take(3).map(|(k, v)| format!("{k} {v:.4}")).collect();
+            let losses: Vec<String> = p
+                .losses
+                .iter()
+                .take(3)
+                .map(|(k, v)| format!("{k} {v:.4}"))
+                .collect();
             let m = p.m.map(|m| format!(" m={m}")).unwrap_or_default();
             eprint!(
                 "\r\x1b[K{:>9}{m} [{}{}] {:>5}/{:<5} {:>6.1}s  {}",
@@ -325,7 +384,11 @@ mod cli {
                     .map_err(|e| Error::io(path.display().to_string(), e))?;
                 std::fs::write(&path, buf).map_err(|e| Error::io(path.display().to_string(), e))?;
             }
-            eprintln!("wrote {} segmented frames to {}", seq.frames.len(), dir.display());
+            eprintln!(
+                "wrote {} segmented frames to {}",
+                seq.frames.len(),
+                dir.display()
+            );
         }
         if let Some(path) = urdf {
             let text = pipeline::urdf(result, &seq, "gsart_model")?;
@@ -362,7 +425,10 @@ mod cli {
     ) -> Result<()> {
         use gsart::synth::{example_names, generate, write_sequence_dir, ObjectKind, SynthOptions};
         let kinds: Vec<ObjectKind> = if kind == "all" {
-            example_names().iter().map(|n| n.parse()).collect::<Result<_>>()?
+            example_names()
+                .iter()
+                .map(|n| n.parse())
+                .collect::<Result<_>>()?
         } else {
             vec![kind.parse()?]
         };
@@ -376,7 +442,11 @@ mod cli {
             o.occluded = occluded;
             o.seed = seed;
             let generated = generate(&o)?;
-            let dir = if kind == "all" { out.join(k.name()) } else { out.to_path_buf() };
+            let dir = if kind == "all" {
+                out.join(k.name())
+            } else {
+                out.to_path_buf()
+            };
             write_sequence_dir(&generated, &dir)?;
             eprintln!(
                 "wrote {} ({} frames, {} parts) to {}",
@@ -392,11 +462,10 @@ mod cli {
     fn articulate(result: &Path, states: &[f64], frame: Option<usize>, out: &Path) -> Result<()> {
         let name = result.display().to_string();
         let result = read_result(result)?;
-        let points = pipeline::articulate(&result, states, frame)
-            .map_err(|e| match e {
-                Error::InvalidArgument(m) => Error::input(&name, m),
-                e => e,
-            })?;
+        let points = pipeline::articulate(&result, states, frame).map_err(|e| match e {
+            Error::InvalidArgument(m) => Error::input(&name, m),
+            e => e,
+        })?;
         let labels = &result.labels[result.canonical_frame];
         let mut buf = Vec::new();
         gsart::io::ply::write_ply(&mut buf, &points, Some(labels), false)
@@ -415,7 +484,10 @@ mod cli {
         let report = gsart::bench::run(workloads, seqs, opts)?;
         println!("{}", report.table());
         if let Some(p) = json {
-            write_text(p, &serde_json::to_string_pretty(&report).unwrap_or_default())?;
+            write_text(
+                p,
+                &serde_json::to_string_pretty(&report).unwrap_or_default(),
+            )?;
         }
         Ok(())
     }

@@ -313,6 +313,7 @@ impl GradAcc {
     /// Backward of the transfer x_t = R_t y + μ_t with y = R_kᵀ(x − μ_k) for the
     /// point's Gaussian i, given dL/dx_t.
     #[inline]
+    #[allow(clippy::too_many_arguments)]
     pub fn transfer_backward(
         &mut self,
         k: usize,

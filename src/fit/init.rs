@@ -5,31 +5,7 @@
 use glam::{DVec3, Vec3};
 
 use super::gaussians::Params;
-
-/// Farthest-point sampling (local until `geom::fps` lands): n indices, starting at `start`.
-pub fn farthest_point_sampling(points: &[Vec3], n: usize, start: usize) -> Vec<usize> {
-    let n = n.min(points.len());
-    let mut out = Vec::with_capacity(n);
-    if n == 0 {
-        return out;
-    }
-    let mut d = vec![f32::INFINITY; points.len()];
-    let mut cur = start.min(points.len() - 1);
-    for _ in 0..n {
-        out.push(cur);
-        let c = points[cur];
-        let mut best = (0, -1.0f32);
-        for (j, p) in points.iter().enumerate() {
-            let dj = d[j].min(p.distance_squared(c));
-            d[j] = dj;
-            if dj > best.1 {
-                best = (j, dj);
-            }
-        }
-        cur = best.0;
-    }
-    out
-}
+use crate::geom::fps::farthest_point_sampling;
 
 /// Initial parameters for m Gaussians on `first` (frame 0's working points).
 pub fn initial_params(first: &[Vec3], m: usize, frames: usize) -> Params {

@@ -40,8 +40,8 @@ impl Schedule {
             lr: 2e-3,
             warmup_lr: 1e-2,
             batch: 512,
-            emd_n: 256,
-            emd_refresh: 3,
+            emd_n: 128,
+            emd_refresh: 4,
         }
     }
 

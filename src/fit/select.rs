@@ -47,7 +47,7 @@ pub fn working_clouds(
     working_size: usize,
     seed: u64,
 ) -> (Vec<Vec<Vec3>>, Vec<Vec<u32>>) {
-    let mut rng = StdRng::seed_from_u64(seed ^ 0x5EED_0F_C10D);
+    let mut rng = StdRng::seed_from_u64(seed ^ 0x005E_ED0F_C10D);
     let mut clouds = Vec::with_capacity(seq.frames.len());
     let mut kept = Vec::with_capacity(seq.frames.len());
     for f in &seq.frames {

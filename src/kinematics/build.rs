@@ -239,3 +239,121 @@ pub fn build_articulated(
     };
     Ok((result, report))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::gt::JointType;
+
+    /// Two touching boxes of points; part 1 rotates about the z axis through (0.5,0,0).
+    type Scene = (Vec<Vec<Vec3>>, Vec<Vec<u32>>, Vec<Vec<DMat4>>);
+
+    fn scene() -> Scene {
+        let k = 4;
+        let mut base = Vec::new();
+        let mut lab = Vec::new();
+        for i in 0..20 {
+            for j in 0..5 {
+                for l in 0..3 {
+                    let x = i as f32 * 0.05;
+                    base.push(Vec3::new(x, j as f32 * 0.05, l as f32 * 0.05));
+                    lab.push(u32::from(x >= 0.5));
+                }
+            }
+        }
+        let pivot = DVec3::new(0.5, 0.0, 0.0);
+        let poses: Vec<Vec<DMat4>> = (0..k)
+            .map(|t| {
+                let m = super::super::chain::screw_exp(
+                    JointType::Revolute,
+                    DVec3::Z,
+                    pivot,
+                    0.3 * t as f64,
+                );
+                vec![DMat4::IDENTITY, m]
+            })
+            .collect();
+        let points = poses
+            .iter()
+            .map(|f| {
+                base.iter()
+                    .zip(&lab)
+                    .map(|(p, &l)| f[l as usize].transform_point3(p.as_dvec3()).as_vec3())
+                    .collect()
+            })
+            .collect();
+        (points, vec![lab; k], poses)
+    }
+
+    #[test]
+    fn two_part_scene_and_cancellation() {
+        let (points, labels, poses) = scene();
+        let opts = KinOptions::default();
+        let (res, rep) =
+            build_articulated(&points, &labels, &poses, 1, &opts, &|| 0.0, &mut |_| {
+                Control::Continue
+            })
+            .unwrap();
+        assert_eq!(rep.parts, 2);
+        assert_eq!(rep.parent, vec![-1, 0]);
+        let j = &res.joints.as_ref().unwrap()[0];
+        assert_eq!(j.joint_type, JointType::Revolute);
+        assert!((DVec3::from(j.axis).z.abs() - 1.0).abs() < 1e-9);
+        assert!(j.state[1].abs() < 1e-12);
+        assert_eq!(rep.timings.len(), 4);
+
+        let mut calls = 0;
+        let err = build_articulated(&points, &labels, &poses, 1, &opts, &|| 0.0, &mut |_| {
+            calls += 1;
+            if calls > 2 {
+                Control::Cancel
+            } else {
+                Control::Continue
+            }
+        });
+        assert!(matches!(err, Err(crate::Error::Cancelled)));
+    }
+
+    #[test]
+    fn empty_part_is_absorbed_into_a_single_part_model() {
+        let (points, labels, poses) = scene();
+        let labels: Vec<Vec<u32>> = labels.iter().map(|l| vec![0; l.len()]).collect();
+        let (res, rep) = build_articulated(
+            &points,
+            &labels,
+            &poses,
+            0,
+            &KinOptions::default(),
+            &|| 0.0,
+            &mut |_| Control::Continue,
+        )
+        .unwrap();
+        assert_eq!(rep.parts, 1);
+        assert_eq!(res.parts, 1);
+        assert!(res.joints.as_ref().unwrap().is_empty());
+        assert_eq!(rep.merge_log[0].kind, "reassign");
+    }
+
+    #[test]
+    fn bad_inputs_are_typed_errors() {
+        let (points, mut labels, poses) = scene();
+        let opts = KinOptions::default();
+        let go = |l: &[Vec<u32>], c: usize| {
+            build_articulated(&points, l, &poses, c, &opts, &|| 0.0, &mut |_| {
+                Control::Continue
+            })
+        };
+        assert!(matches!(
+            go(&labels, 9),
+            Err(crate::Error::InvalidArgument(_))
+        ));
+        labels[2][0] = 7;
+        assert!(matches!(go(&labels, 0), Err(crate::Error::Sequence(_))));
+        labels[2].pop();
+        assert!(matches!(go(&labels, 0), Err(crate::Error::Sequence(_))));
+        assert!(matches!(
+            go(&labels[..1], 0),
+            Err(crate::Error::Sequence(_))
+        ));
+    }
+}

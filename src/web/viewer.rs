@@ -52,9 +52,20 @@ impl Viewer {
         self.inner.borrow().backend().to_string()
     }
 
+    /// Graphics adapter as the browser reports it (name, device type, driver).
+    pub fn adapter_info(&self) -> String {
+        self.inner.borrow().adapter_info().to_string()
+    }
+
     /// MSAA sample count in use (4, or 1 where multisampling is unavailable).
     pub fn sample_count(&self) -> u32 {
         self.inner.borrow().sample_count()
+    }
+
+    /// Turn 4× multisampling on or off; returns whether it is on (it stays off
+    /// where unsupported). Default: on, except on software renderers.
+    pub fn set_msaa(&self, on: bool) -> bool {
+        self.inner.borrow_mut().set_msaa(on)
     }
 
     /// GPU validation errors so far, newline-separated ("" when none).
@@ -76,7 +87,8 @@ impl Viewer {
             .map_err(js_err)
     }
 
-    /// Per-point RGBA8 colours used in colour mode 1 (e.g. colour by frame).
+    /// Override colours for the current points (RGBA8, 4 bytes per point; e.g.
+    /// colour by frame); shown until the next `set_points`. Empty clears them.
     pub fn set_point_colors(&self, rgba: &[u8]) -> Result<(), JsValue> {
         self.inner
             .borrow_mut()
@@ -84,7 +96,8 @@ impl Viewer {
             .map_err(js_err)
     }
 
-    /// 0 = by part label (palette), 1 = colours from `set_point_colors`, 2 = plain grey.
+    /// 0 = override colours if given, else by part label (default);
+    /// 1 = always by part label; 2 = plain grey.
     pub fn set_color_mode(&self, mode: u32) -> Result<(), JsValue> {
         self.inner.borrow_mut().set_color_mode(mode).map_err(js_err)
     }
@@ -255,6 +268,13 @@ pub fn palette_color(i: u32) -> Vec<u8> {
 pub fn palette_css(i: u32) -> String {
     let [r, g, b] = palette::color(i);
     format!("#{r:02x}{g:02x}{b:02x}")
+}
+
+/// The first `n` palette colours as `[r0, g0, b0, r1, ...]` (n ≤ 4096), for
+/// the page's legend and tree diagram.
+#[wasm_bindgen]
+pub fn part_palette(n: u32) -> Vec<u8> {
+    (0..n.min(4096)).flat_map(palette::color).collect()
 }
 
 /// Number of distinct palette colours before it repeats.

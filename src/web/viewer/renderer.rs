@@ -12,13 +12,21 @@ use web_sys::HtmlCanvasElement;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth24Plus;
 /// Offscreen read-back format: exact bytes, no sRGB encoding.
 pub const OFFSCREEN_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+/// Points are drawn as one plain (non-instanced) triangle each that circumscribes
+/// the disk: SwiftShader and some mobile GPUs run one tiny instance at a time
+/// (measured in headless Chromium, 40k points: ~1 s per frame instanced,
+/// ~0.3–0.6 s as indexed quads, less as triangles — vertex work dominates).
+const CORNERS: usize = 3;
 const POINT_STRIDE: u64 = 12;
 const COLOR_STRIDE: u64 = 4;
 /// centre(3) + rotation columns(9) + scale(3) + packed colour(1), as u32 words.
 const GAUSS_WORDS: usize = 16;
 /// Colour modes of `set_color_mode`.
-pub const COLOR_BY_LABEL: u32 = 0;
-pub const COLOR_CUSTOM: u32 = 1;
+/// Override colours when the page gave some for the current points, else by label.
+pub const COLOR_AUTO: u32 = 0;
+/// Always by label, ignoring override colours.
+pub const COLOR_BY_LABEL: u32 = 1;
+/// One neutral grey.
 pub const COLOR_PLAIN: u32 = 2;
 
 #[repr(C)]
@@ -93,7 +101,9 @@ pub struct Renderer {
     surface: wgpu::Surface<'static>,
     config: wgpu::SurfaceConfiguration,
     backend: &'static str,
+    adapter_info: String,
     sample_count: u32,
+    msaa_supported: bool,
     layout: wgpu::PipelineLayout,
     globals_buf: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
@@ -104,6 +114,7 @@ pub struct Renderer {
     screen: Option<Targets>,
 
     positions: GrowBuffer,
+    pos_scratch: Vec<f32>,
     colors: GrowBuffer,
     n_points: u32,
     labels: Vec<u32>,
@@ -120,6 +131,9 @@ pub struct Renderer {
     gauss: GrowBuffer,
     n_gauss: u32,
     gauss_scratch: Vec<u32>,
+    /// (depth key, index) and the instance words in back-to-front order.
+    gauss_order: Vec<(f32, u32)>,
+    gauss_sorted: Vec<u32>,
     gauss_visible: bool,
 
     axes: GrowBuffer,
@@ -262,10 +276,11 @@ impl Renderer {
         };
         surface.configure(&device, &config);
 
-        let sample_count = if msaa_ok(&adapter, format)
+        let msaa_supported = msaa_ok(&adapter, format)
             && msaa_ok(&adapter, OFFSCREEN_FORMAT)
-            && msaa_ok(&adapter, DEPTH_FORMAT)
-        {
+            && msaa_ok(&adapter, DEPTH_FORMAT);
+        // Software rasterisers (SwiftShader) pay dearly for MSAA: off there by default.
+        let sample_count = if msaa_supported && info.device_type != wgpu::DeviceType::Cpu {
             4
         } else {
             1
@@ -329,6 +344,7 @@ impl Renderer {
             shader_gauss: shader(&device, "gaussians", include_str!("shaders/gaussians.wgsl")),
             shader_mesh: shader(&device, "mesh", include_str!("shaders/mesh.wgsl")),
             positions: GrowBuffer::new(&device, "point positions", vertex),
+            pos_scratch: Vec::new(),
             colors: GrowBuffer::new(&device, "point colours", vertex),
             gauss: GrowBuffer::new(&device, "gaussians", vertex),
             axes: GrowBuffer::new(&device, "axes", vertex),
@@ -338,7 +354,9 @@ impl Renderer {
             surface,
             config,
             backend,
+            adapter_info: format!("{} ({:?}, {})", info.name, info.device_type, info.driver),
             sample_count,
+            msaa_supported,
             layout,
             globals_buf,
             bind_group,
@@ -348,7 +366,7 @@ impl Renderer {
             labels: Vec::new(),
             custom_colors: Vec::new(),
             color_scratch: Vec::new(),
-            color_mode: COLOR_BY_LABEL,
+            color_mode: COLOR_AUTO,
             point_size: 4.0,
             dpr: 1.0,
             sphere_vb,
@@ -357,6 +375,8 @@ impl Renderer {
             small_sphere: mesh::icosphere(1),
             n_gauss: 0,
             gauss_scratch: Vec::new(),
+            gauss_order: Vec::new(),
+            gauss_sorted: Vec::new(),
             gauss_visible: true,
             n_axes_verts: 0,
             axes_scratch: Vec::new(),
@@ -379,8 +399,24 @@ impl Renderer {
         self.backend
     }
 
+    pub fn adapter_info(&self) -> &str {
+        &self.adapter_info
+    }
+
     pub fn sample_count(&self) -> u32 {
         self.sample_count
+    }
+
+    /// Turn 4× MSAA on or off (where supported); returns whether it is on.
+    pub fn set_msaa(&mut self, on: bool) -> bool {
+        let count = if on && self.msaa_supported { 4 } else { 1 };
+        if count != self.sample_count {
+            self.sample_count = count;
+            // Pipelines and attachments are built for one sample count.
+            self.pipelines.clear();
+            self.screen = None;
+        }
+        self.sample_count > 1
     }
 
     /// GPU validation errors seen so far (empty when all is well).
@@ -453,12 +489,12 @@ impl Renderer {
         let point_layout = [
             Some(wgpu::VertexBufferLayout {
                 array_stride: POINT_STRIDE,
-                step_mode: wgpu::VertexStepMode::Instance,
+                step_mode: wgpu::VertexStepMode::Vertex,
                 attributes: &pos_attr,
             }),
             Some(wgpu::VertexBufferLayout {
                 array_stride: COLOR_STRIDE,
-                step_mode: wgpu::VertexStepMode::Instance,
+                step_mode: wgpu::VertexStepMode::Vertex,
                 attributes: &col_attr,
             }),
         ];
@@ -616,14 +652,31 @@ impl Renderer {
                 labels.len()
             ));
         }
-        if n > u32::MAX as usize / 64 {
-            return Err(format!("set_points: {n} points is too many to draw"));
+        let max_points = (self.device.limits().max_buffer_size / (CORNERS as u64 * POINT_STRIDE))
+            .min(u32::MAX as u64 / 8) as usize;
+        if n > max_points {
+            return Err(format!(
+                "set_points: {n} points exceed what this GPU can draw at once ({max_points}); downsample first"
+            ));
         }
-        self.positions
-            .write(&self.device, &self.queue, bytemuck::cast_slice(positions));
+        // Every corner of a quad carries the point's centre; the vertex shader
+        // pushes it out by the corner's offset in pixels.
+        self.pos_scratch.clear();
+        for p in positions.chunks_exact(3) {
+            for _ in 0..CORNERS {
+                self.pos_scratch.extend_from_slice(p);
+            }
+        }
+        self.positions.write(
+            &self.device,
+            &self.queue,
+            bytemuck::cast_slice(&self.pos_scratch),
+        );
         self.n_points = n as u32;
         self.labels.clear();
         self.labels.extend_from_slice(labels);
+        // Override colours belong to the points they were given for.
+        self.custom_colors.clear();
         self.point_bounds = bounds_of(positions);
         if self.scene_bounds.is_none() && self.point_bounds.is_some() {
             self.scene_bounds = self.point_bounds;
@@ -634,13 +687,15 @@ impl Renderer {
         Ok(())
     }
 
-    /// Per-point RGBA8 colours for [`COLOR_CUSTOM`]; points beyond the given
-    /// colours fall back to their label colour.
+    /// Override colours (RGBA8, one per current point) shown instead of the
+    /// label colours in [`COLOR_AUTO`] mode until the next `set_points`; empty
+    /// clears the override.
     pub fn set_point_colors(&mut self, rgba: &[u8]) -> Result<(), String> {
-        if !rgba.len().is_multiple_of(4) {
+        if !rgba.is_empty() && rgba.len() != 4 * self.n_points as usize {
             return Err(format!(
-                "set_point_colors: {} bytes is not RGBA (a multiple of 4)",
-                rgba.len()
+                "set_point_colors: {} bytes for {} points (need 4 RGBA bytes per point)",
+                rgba.len(),
+                self.n_points
             ));
         }
         self.custom_colors.clear();
@@ -650,9 +705,9 @@ impl Renderer {
     }
 
     pub fn set_color_mode(&mut self, mode: u32) -> Result<(), String> {
-        if mode > COLOR_PLAIN {
+        if !matches!(mode, COLOR_AUTO | COLOR_BY_LABEL | COLOR_PLAIN) {
             return Err(format!(
-                "set_color_mode: unknown mode {mode} (0 = by part, 1 = custom colours, 2 = plain)"
+                "set_color_mode: unknown mode {mode} (0 = override colours or part, 1 = part, 2 = plain)"
             ));
         }
         self.color_mode = mode;
@@ -666,7 +721,7 @@ impl Renderer {
         for i in 0..n {
             let label = self.labels.get(i).copied().unwrap_or(u32::MAX);
             let rgba = match self.color_mode {
-                COLOR_CUSTOM if 4 * i + 4 <= self.custom_colors.len() => {
+                COLOR_AUTO if 4 * i + 4 <= self.custom_colors.len() => {
                     let c = &self.custom_colors[4 * i..4 * i + 4];
                     [c[0], c[1], c[2], 255]
                 }
@@ -679,7 +734,9 @@ impl Renderer {
                     [c[0], c[1], c[2], 255]
                 }
             };
-            self.color_scratch.extend_from_slice(&rgba);
+            for _ in 0..CORNERS {
+                self.color_scratch.extend_from_slice(&rgba);
+            }
         }
         self.colors
             .write(&self.device, &self.queue, &self.color_scratch);
@@ -753,13 +810,43 @@ impl Renderer {
             let part = parts.get(k).copied().unwrap_or(k as u32);
             self.gauss_scratch.push(palette::pack(palette::color(part)));
         }
+        self.n_gauss = m as u32;
+        self.sort_gaussians();
+        Ok(())
+    }
+
+    /// Upload the Gaussians farthest-first for the current camera, so the
+    /// translucent ellipsoids blend in the right order (no per-frame allocation).
+    fn sort_gaussians(&mut self) {
+        let m = self.n_gauss as usize;
+        if m == 0 {
+            return;
+        }
+        let eye = self.camera.eye();
+        self.gauss_order.clear();
+        for k in 0..m {
+            let w = &self.gauss_scratch[k * GAUSS_WORDS..k * GAUSS_WORDS + 3];
+            let c = Vec3::new(
+                f32::from_bits(w[0]),
+                f32::from_bits(w[1]),
+                f32::from_bits(w[2]),
+            );
+            self.gauss_order
+                .push((-(c - eye).length_squared(), k as u32));
+        }
+        self.gauss_order
+            .sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        self.gauss_sorted.clear();
+        for &(_, k) in &self.gauss_order {
+            let k = k as usize;
+            self.gauss_sorted
+                .extend_from_slice(&self.gauss_scratch[k * GAUSS_WORDS..(k + 1) * GAUSS_WORDS]);
+        }
         self.gauss.write(
             &self.device,
             &self.queue,
-            bytemuck::cast_slice(&self.gauss_scratch),
+            bytemuck::cast_slice(&self.gauss_sorted),
         );
-        self.n_gauss = m as u32;
-        Ok(())
     }
 
     pub fn set_gaussians_visible(&mut self, visible: bool) {
@@ -1003,11 +1090,11 @@ impl Renderer {
             pass.draw(0..self.n_grid_verts, 0..1);
         }
         if self.n_points > 0 {
-            let n = self.n_points as u64;
+            let verts = self.n_points as u64 * CORNERS as u64;
             pass.set_pipeline(&pipes.points);
-            pass.set_vertex_buffer(0, self.positions.buf.slice(..n * POINT_STRIDE));
-            pass.set_vertex_buffer(1, self.colors.buf.slice(..n * COLOR_STRIDE));
-            pass.draw(0..6, 0..self.n_points);
+            pass.set_vertex_buffer(0, self.positions.buf.slice(..verts * POINT_STRIDE));
+            pass.set_vertex_buffer(1, self.colors.buf.slice(..verts * COLOR_STRIDE));
+            pass.draw(0..self.n_points * CORNERS as u32, 0..1);
         }
         if self.n_axes_verts > 0 {
             pass.set_pipeline(&pipes.mesh);
@@ -1048,6 +1135,9 @@ impl Renderer {
             self.screen = Some(self.make_targets(w, h, self.config.format));
         }
         let idx = self.pipelines_for(self.config.format);
+        if self.gauss_visible {
+            self.sort_gaussians();
+        }
         self.write_globals(
             (w, h),
             self.config.format.is_srgb(),
@@ -1080,9 +1170,14 @@ impl Renderer {
             ));
         }
         let idx = self.pipelines_for(OFFSCREEN_FORMAT);
+        if self.gauss_visible {
+            self.sort_gaussians();
+        }
         let saved = self.camera.viewport;
         self.camera.set_viewport(width as f32, height as f32);
-        self.write_globals((width, height), false, self.point_size);
+        // Same look as the canvas, scaled to the image: a 2× screenshot gets 2× points.
+        let scale = height as f32 / self.camera.viewport[1].max(1.0);
+        self.write_globals((width, height), false, self.point_size * scale);
         self.camera.viewport = saved;
 
         let texture = self.device.create_texture(&wgpu::TextureDescriptor {

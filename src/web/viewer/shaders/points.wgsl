@@ -1,4 +1,5 @@
-// Points as screen-space disks: one instanced quad per point, round by discard,
+// Points as screen-space disks: one triangle (3 vertices sharing the centre)
+// around the unit disk per point, round by discard,
 // shaded as a tiny sphere lit from the viewer (the centre keeps the exact colour).
 struct PointOut {
     @builtin(position) clip: vec4<f32>,
@@ -12,11 +13,14 @@ fn vs_main(
     @location(0) center: vec3<f32>,
     @location(1) color: vec4<f32>,
 ) -> PointOut {
-    var corners = array<vec2<f32>, 6>(
-        vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, -1.0), vec2<f32>(1.0, 1.0),
-        vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
-    );
-    let corner = corners[vi % 6u];
+    // Equilateral triangle with the unit circle as its incircle.
+    let k = vi % 3u;
+    var corner = vec2<f32>(0.0, 2.0);
+    if (k == 1u) {
+        corner = vec2<f32>(-1.7320508, -1.0);
+    } else if (k == 2u) {
+        corner = vec2<f32>(1.7320508, -1.0);
+    }
     var out: PointOut;
     var clip = globals.view_proj * vec4<f32>(center, 1.0);
     // Half a diameter in NDC is size / viewport.
