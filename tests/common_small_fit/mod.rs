@@ -11,7 +11,12 @@ pub fn small_fit_labels() -> Vec<u32> {
     so.points = 200;
     so.seed = 5;
     let s = generate(&so).expect("generate");
-    let opts = FitOptions { quality: Quality::Fast, iters: Some(120), seed: 9, ..Default::default() };
+    let opts = FitOptions {
+        quality: Quality::Fast,
+        iters: Some(120),
+        seed: 9,
+        ..Default::default()
+    };
     let r = fit_step1_single(&s.sequence, 3, &opts, &mut |_| Control::Continue).expect("fit");
     r.labels.concat()
 }
