@@ -20,15 +20,26 @@ use crate::{Error, Result};
 /// (~10 × 800 visible points) still count as robots.
 const ROBOT_TOTAL_POINTS: usize = 6000;
 
-/// Whether the paper's small-object schedule and part range apply.
+/// Whether the paper's small-object schedule and part range apply. Robot-sized means
+/// dense full frames (≥ 3000 points each, like RoboArt's 4096; a 2048-point laptop is
+/// small), or occluded frames (point counts vary by > 15 %) that add up to
+/// `ROBOT_TOTAL_POINTS`, like Occluded-RoboArt's ~10 × 800 visible points.
 pub fn is_small(seq: &Sequence, working_size: usize) -> bool {
-    let total: usize = seq
+    let sizes: Vec<usize> = seq
         .frames
         .iter()
         .map(|f| f.points.len().min(working_size.max(1)))
-        .sum();
-    total < ROBOT_TOTAL_POINTS
+        .collect();
+    let total: usize = sizes.iter().sum();
+    let max = sizes.iter().copied().max().unwrap_or(0);
+    let min = sizes.iter().copied().min().unwrap_or(0);
+    let dense = max >= ROBOT_FRAME_POINTS;
+    let occluded_robot = (min as f64) < 0.85 * max as f64 && total >= ROBOT_TOTAL_POINTS;
+    !(dense || occluded_robot)
 }
+
+/// Points per full frame from which a sequence counts as robot-sized.
+const ROBOT_FRAME_POINTS: usize = 3000;
 
 /// Default inclusive range of m: 10–15 for robot-sized sequences, 3–7 for small or
 /// sparse ones (see `is_small`).
@@ -299,4 +310,31 @@ fn run_all(
                 .unwrap_or(Err(Error::Cancelled))
         })
         .collect()
+}
+
+#[cfg(test)]
+mod size_rule_tests {
+    use super::*;
+    use crate::io::sequence::Frame;
+
+    fn seq(sizes: &[usize]) -> Sequence {
+        Sequence {
+            frames: sizes
+                .iter()
+                .map(|&n| Frame {
+                    points: vec![glam::Vec3::ZERO; n],
+                    ..Default::default()
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn part_range_follows_density_and_occlusion() {
+        assert_eq!(default_part_range(&seq(&[4096; 10])), (10, 15)); // RoboArt
+        assert_eq!(default_part_range(&seq(&[512; 4])), (3, 7)); // Sapien
+        assert_eq!(default_part_range(&seq(&[2048; 10])), (3, 7)); // a dense small object
+        let occluded = [800, 650, 900, 1000, 700, 820, 760, 900, 640, 880];
+        assert_eq!(default_part_range(&seq(&occluded)), (10, 15)); // Occluded-RoboArt
+    }
 }

@@ -88,3 +88,31 @@ test('a page without any graphics backend says so clearly', async () => {
   await shot(page, 'smoke-no-backend');
   await context.close();
 });
+
+test('clicking an example chip loads it and puts it in the URL', async () => {
+  const { page, errors, context } = await newPage(browser);
+  await page.goto(`${srv.base}/`);
+  await waitLoaded(page);
+  assert.equal(await page.locator('#empty-hint').isVisible(), true, 'an empty page invites a drop');
+  await page.getByLabel('Example cabinet').click();
+  await page.waitForFunction(() => /cabinet \(example\)/.test(document.querySelector('#sequence-summary').innerText));
+  assert.match(page.url(), /[?&]example=cabinet/);
+  assert.equal(await page.locator('#empty-hint').isVisible(), false);
+  await page.waitForTimeout(300);
+  assert.ok((await canvasStats(page)).lit > 500);
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
+test('narrow screens stack the view above the panel', async () => {
+  const { page, errors, context } = await newPage(browser, { width: 420, height: 860 });
+  await page.goto(`${srv.base}/?example=laptop`);
+  await waitLoaded(page);
+  const view = await page.locator('#view').boundingBox();
+  const panel = await page.locator('.panel').boundingBox();
+  assert.ok(panel.y >= view.y + view.height - 1, 'the panel is below the view');
+  assert.ok(view.width >= 400, 'the view spans the width');
+  await shot(page, 'smoke-narrow');
+  assert.deepEqual(errors, []);
+  await context.close();
+});

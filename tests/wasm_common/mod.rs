@@ -76,3 +76,14 @@ fn ground_truth_forward_kinematics_in_wasm() {
         }
     }
 }
+
+#[path = "../common_small_fit/mod.rs"]
+mod common_small_fit;
+
+/// The same small Step-1 fit as the native golden test: identical labels in wasm.
+#[wasm_bindgen_test]
+fn small_fit_gives_the_native_labels_in_wasm() {
+    let labels = common_small_fit::small_fit_labels();
+    let golden: Vec<u32> = serde_json::from_str(common_small_fit::GOLDEN).unwrap();
+    assert_eq!(labels, golden);
+}

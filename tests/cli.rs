@@ -1,0 +1,162 @@
+//! The `gsart` binary end to end: `truth` + `eval` on bench-dev (the ground truth
+//! scores perfectly), `synth` writes a readable sequence, `articulate` re-poses a
+//! result, and bad input gives a one-line error naming the file.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn gsart(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_gsart"))
+        .args(args)
+        .output()
+        .expect("run gsart");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn bench_dev() -> Option<PathBuf> {
+    ["../shared/bench-dev", "/work/shared/bench-dev"]
+        .iter()
+        .map(PathBuf::from)
+        .find(|p| p.is_dir())
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("gsart-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn ground_truth_as_result_scores_perfectly_on_bench_dev() {
+    let Some(root) = bench_dev() else {
+        eprintln!("skip: bench-dev not present");
+        return;
+    };
+    let dir = tmp("truth");
+    for seq in [
+        "full/xarm7_00",
+        "full/panda_gripper_00",
+        "occluded/solo12_00",
+    ] {
+        let seq_dir = root.join(seq);
+        let out = dir.join("gt.json");
+        let (ok, _, err) = gsart(&[
+            "truth",
+            seq_dir.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        let (ok, stdout, err) = gsart(&["eval", out.to_str().unwrap(), seq_dir.to_str().unwrap()]);
+        assert!(ok, "{err}");
+        let m: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        assert_eq!(m["mean_ri"], 1.0, "{seq}: {m}");
+        assert_eq!(m["canonical_ri"], 1.0, "{seq}: {m}");
+        assert!(
+            m["reconstruction_error"].as_f64().unwrap() < 1e-9,
+            "{seq}: {m}"
+        );
+        assert!(m["flow_error"].as_f64().unwrap() < 1e-9, "{seq}: {m}");
+        assert_eq!(m["tree_edit_distance"], 0, "{seq}: {m}");
+    }
+}
+
+#[test]
+fn synth_then_articulate() {
+    let dir = tmp("synth");
+    let seq = dir.join("laptop");
+    let (ok, _, err) = gsart(&[
+        "synth",
+        "laptop",
+        "--out",
+        seq.to_str().unwrap(),
+        "--frames",
+        "3",
+        "--points",
+        "256",
+    ]);
+    assert!(ok, "{err}");
+    assert!(seq.join("frame_002.ply").is_file() && seq.join("gt.json").is_file());
+    let result = dir.join("r.json");
+    let (ok, _, err) = gsart(&[
+        "truth",
+        seq.to_str().unwrap(),
+        "--out",
+        result.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let posed = dir.join("posed.ply");
+    let run = |q: &str| {
+        let (ok, _, err) = gsart(&[
+            "articulate",
+            result.to_str().unwrap(),
+            "--states",
+            q,
+            "--out",
+            posed.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        gsart::io::ply::read_ply(&std::fs::read(&posed).unwrap(), "posed.ply").unwrap()
+    };
+    let rest = run("0");
+    let opened = run("-0.8");
+    assert_eq!(rest.points.len(), 256);
+    // Only the lid (part 1) moves.
+    let labels = rest.labels.clone().unwrap();
+    let moved = |part: u32| {
+        rest.points
+            .iter()
+            .zip(&opened.points)
+            .zip(&labels)
+            .filter(|(_, &l)| l == part)
+            .map(|((a, b), _)| a.distance(*b))
+            .fold(0.0f32, f32::max)
+    };
+    assert!(moved(0) < 1e-6, "base moved {}", moved(0));
+    assert!(moved(1) > 0.05, "lid did not move");
+    // Wrong number of states: a clear error naming the result file.
+    let (ok, _, err) = gsart(&[
+        "articulate",
+        result.to_str().unwrap(),
+        "--states",
+        "0,0,0",
+        "--out",
+        posed.to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && err.contains("r.json") && err.contains("joint"),
+        "{err}"
+    );
+}
+
+#[test]
+fn bad_input_is_one_clear_line() {
+    let dir = tmp("bad");
+    let a = dir.join("a.ply");
+    std::fs::write(&a, b"PK\x03\x04 zip bytes").unwrap();
+    let b = dir.join("b.ply");
+    std::fs::write(
+        &b,
+        b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n",
+    )
+    .unwrap();
+    let out = dir.join("r.json");
+    let (ok, _, err) = gsart(&[
+        "fit",
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert!(
+        err.starts_with("gsart: ") && err.contains("a.ply") && err.contains("ZIP"),
+        "{err}"
+    );
+    assert!(!Path::new(&out).exists());
+}
