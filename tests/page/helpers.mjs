@@ -52,7 +52,7 @@ export async function newPage(browser, { width = 1280, height = 800 } = {}) {
 }
 
 /** Waits until the app finished its start-up (wasm loaded, viewer created, URL params handled). */
-export async function waitLoaded(page, timeout = 60_000) {
+export async function waitLoaded(page, timeout = 120_000) {
   await page.waitForFunction(() => document.body.dataset.loaded === '1', null, { timeout });
 }
 
