@@ -30,7 +30,7 @@ test('?example=laptop loads, shows points, no console errors', async () => {
   await context.close();
 });
 
-test('keyboard: arrows step frames, ? opens the shortcuts, R/F keep the object in view', async () => {
+test('keyboard: arrows step frames, shift+arrows orbit, + zooms, ? opens the shortcuts, R keeps the object in view', async () => {
   const { page, errors, context } = await newPage(browser);
   await page.goto(`${srv.base}/?example=laptop`);
   await waitLoaded(page);
@@ -61,6 +61,17 @@ test('keyboard: arrows step frames, ? opens the shortcuts, R/F keep the object i
   const c1 = await canvasPng(page);
   assert.ok(await pixelDiff(page, c0, c1) > 50, 'dragging orbits the camera');
   assert.match(await page.evaluate(() => location.hash), /cam=/, 'the camera is kept in the URL hash');
+  // Keyboard camera: Shift+arrows orbit, + zooms; the frame does not change.
+  const frameBefore = (await page.locator('#frame-label').innerText()).trim();
+  await page.keyboard.press('Shift+ArrowRight');
+  await page.keyboard.press('Shift+ArrowRight');
+  await page.waitForTimeout(300);
+  const c2 = await canvasPng(page);
+  assert.ok(await pixelDiff(page, c1, c2) > 50, 'Shift+arrows orbit the camera');
+  assert.equal((await page.locator('#frame-label').innerText()).trim(), frameBefore);
+  await page.keyboard.press('+');
+  await page.waitForTimeout(300);
+  assert.ok(await pixelDiff(page, c2, await canvasPng(page)) > 50, '+ zooms');
   await page.keyboard.press('r');
   await page.waitForTimeout(300);
   const st = await canvasStats(page);

@@ -1005,6 +1005,17 @@ function wire() {
     if (t instanceof HTMLElement && t.tagName === 'BUTTON' && (e.key === ' ' || e.key === 'Enter')) return;
     switch (e.key) {
       case ' ': e.preventDefault(); togglePlay(); break;
+      case 'ArrowRight': case 'ArrowLeft': case 'ArrowUp': case 'ArrowDown':
+        if (!e.shiftKey) break;
+        // Shift + arrows orbit the camera (plain arrows step frames).
+        e.preventDefault();
+        S.view?.orbit({ ArrowRight: 20, ArrowLeft: -20, ArrowUp: 0, ArrowDown: 0 }[e.key],
+          { ArrowRight: 0, ArrowLeft: 0, ArrowUp: -20, ArrowDown: 20 }[e.key]);
+        return;
+      case '+': case '=': S.view?.zoom(1 / 1.15); return;
+      case '-': case '_': S.view?.zoom(1.15); return;
+    }
+    switch (e.key) {
       case 'ArrowRight': e.preventDefault(); stopPlay(); showFrame(S.current + 1); break;
       case 'ArrowLeft': e.preventDefault(); stopPlay(); showFrame(S.current - 1); break;
       case 'r': case 'R': S.view?.resetView(); break;

@@ -116,6 +116,9 @@ export class View {
 
   resetView() { this.viewer.reset_view(); this.request(); this.cameraMoved(); }
   frameObject() { this.viewer.frame_object(); this.request(); this.cameraMoved(); }
+  /** Keyboard camera: orbit by (dx, dy) pixels-equivalent, zoom by a factor. */
+  orbit(dx, dy) { this.viewer.orbit(dx, dy); this.request(); this.cameraMoved(); }
+  zoom(f) { this.viewer.zoom(f); this.request(); this.cameraMoved(); }
   cameraState() { return this.viewer.camera_state(); }
   setCameraState(s) {
     try { this.viewer.set_camera_state(s); this.request(); return true; } catch { return false; }
