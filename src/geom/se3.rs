@@ -5,8 +5,7 @@ use glam::{DMat3, DMat4, DVec3};
 
 /// 16 numbers, row-major, as in the result format.
 pub fn to_row_major(m: &DMat4) -> [f64; 16] {
-    let t = m.transpose().to_cols_array();
-    t
+    m.transpose().to_cols_array()
 }
 
 /// Inverse of [`to_row_major`].
