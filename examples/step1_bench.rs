@@ -152,27 +152,7 @@ fn main() {
                     &mut |_| Control::Continue,
                 )
                 .expect("fit");
-                let fc =
-                    gsart::fit::fitter::final_chamfer(&prep.data, &params, prep.occluded, 1024);
-                let model = params.to_model();
-                let labels = prep
-                    .data
-                    .frames32
-                    .iter()
-                    .enumerate()
-                    .map(|(k, f)| model.segment(k, f))
-                    .collect();
-                gsart::fit::Step1Result {
-                    model,
-                    labels,
-                    working: prep.working.clone(),
-                    final_chamfer: fc,
-                    occlusion_used: prep.occluded,
-                    iterations: stats.iterations,
-                    m,
-                    candidates: vec![(m, fc)],
-                    timings: Default::default(),
-                }
+                select::candidate_result(&prep, &params, m, stats.iterations, 0.0)
             }
             None => gsart::pipeline::fit_step1(&seq, &opts, &|_| Control::Continue).expect("fit"),
         };

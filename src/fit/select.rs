@@ -158,7 +158,23 @@ pub fn run_candidate(
     #[cfg(not(target_arch = "wasm32"))]
     let t0 = std::time::Instant::now();
     let (params, stats) = fitter::fit_candidate(&prep.data, m, &cfg, prep.flow.as_ref(), cb)?;
-    let final_chamfer = fitter::final_chamfer(&prep.data, &params, prep.occluded, 1024);
+    #[cfg(not(target_arch = "wasm32"))]
+    let secs = t0.elapsed().as_secs_f64();
+    #[cfg(target_arch = "wasm32")]
+    let secs = 0.0;
+    Ok(candidate_result(prep, &params, m, stats.iterations, secs))
+}
+
+/// A fitted candidate as a `Step1Result`: its model, the labels of the working
+/// clouds, and the model-selection Chamfer. `secs` is the caller's timing.
+pub fn candidate_result(
+    prep: &Prepared,
+    params: &super::gaussians::Params,
+    m: usize,
+    iterations: usize,
+    secs: f64,
+) -> Step1Result {
+    let final_chamfer = fitter::final_chamfer(&prep.data, params, prep.occluded, 1024);
     let model = params.to_model();
     let labels = prep
         .data
@@ -167,24 +183,20 @@ pub fn run_candidate(
         .enumerate()
         .map(|(k, f)| model.segment(k, f))
         .collect();
-    #[cfg(not(target_arch = "wasm32"))]
-    let secs = t0.elapsed().as_secs_f64();
-    #[cfg(target_arch = "wasm32")]
-    let secs = 0.0;
-    Ok(Step1Result {
+    Step1Result {
         model,
         labels,
         working: prep.working.clone(),
         final_chamfer,
         occlusion_used: prep.occluded,
-        iterations: stats.iterations,
+        iterations,
         m,
         candidates: vec![(m, final_chamfer)],
         timings: Timings {
             total_s: secs,
-            per_candidate: vec![(m, secs, stats.iterations)],
+            per_candidate: vec![(m, secs, iterations)],
         },
-    })
+    }
 }
 
 /// Candidate list from the options (or the data).
