@@ -52,6 +52,9 @@ fn main() {
     let mut emd_n: Option<usize> = None;
     let mut refresh: Option<usize> = None;
     let mut pose: Option<gsart::fit::pose_init::PoseInitOpts> = Some(Default::default());
+    let mut search: Option<gsart::fit::pose_search::PoseSearchOpts> = Some(Default::default());
+    let mut decay: Option<f64> = None;
+    let mut mseg: Option<gsart::fit::motion_seg::MotionSegOpts> = Some(Default::default());
     let mut i = 0;
     while i < args.len() {
         let a = args[i].as_str();
@@ -93,6 +96,54 @@ fn main() {
             "--flow" => weights.flow = val().parse().expect("flow"),
             "--track" => notrack = false,
             "--no-pose-init" => pose = None,
+            "--no-search" => search = None,
+            "--no-mseg" => mseg = None,
+            "--decay" => decay = Some(val().parse().expect("decay")),
+            "--ms-rounds" => {
+                if let Some(o) = mseg.as_mut() {
+                    o.rounds = val().parse().expect("ms-rounds")
+                }
+            }
+            "--ms-near" => {
+                if let Some(o) = mseg.as_mut() {
+                    o.nearest = val().parse().expect("ms-near")
+                }
+            }
+            "--ps-rot" => {
+                if let Some(o) = search.as_mut() {
+                    o.rotations = val().parse().expect("ps-rot")
+                }
+            }
+            "--ps-top" => {
+                if let Some(o) = search.as_mut() {
+                    o.top = val().parse().expect("ps-top")
+                }
+            }
+            "--ps-probe" => {
+                if let Some(o) = search.as_mut() {
+                    o.probe = val().parse().expect("ps-probe")
+                }
+            }
+            "--ps-rigid" => {
+                if let Some(o) = search.as_mut() {
+                    o.rigid_ratio = val().parse().expect("ps-rigid")
+                }
+            }
+            "--ps-ficp" => {
+                if let Some(o) = search.as_mut() {
+                    o.final_icp = val().parse().expect("ps-ficp")
+                }
+            }
+            "--ps-again" => {
+                if let Some(o) = search.as_mut() {
+                    o.again_at = val().parse().expect("ps-again")
+                }
+            }
+            "--ps-pivots" => {
+                if let Some(o) = search.as_mut() {
+                    o.pivots = val().parse().expect("ps-pivots")
+                }
+            }
             "--pi-refine" => {
                 pose.get_or_insert_with(Default::default).refine_every =
                     val().parse().expect("refine")
@@ -124,8 +175,14 @@ fn main() {
                 cfg.weights = weights.clone();
                 cfg.track_init = !notrack;
                 cfg.pose_init = pose;
+                cfg.pose_search = search;
+                cfg.motion_seg = mseg;
+                cfg.lr_decay = decay;
                 if let Some(v) = lr {
                     cfg.sched.lr = v;
+                    if let Some(o) = cfg.pose_search.as_mut() {
+                        o.main_lr = v;
+                    }
                 }
                 if let Some(v) = batch {
                     cfg.sched.batch = v;
@@ -195,6 +252,32 @@ fn main() {
                 y_t.push(y);
             }
             recon += e / pts.len() as f64;
+            if std::env::var("VERBOSE").as_deref() == Ok("2") {
+                // Per predicted part: point count, mean error, majority GT label.
+                let m = res.model.m;
+                let mut cnt = vec![0usize; m];
+                let mut err = vec![0.0; m];
+                let mut maj = vec![std::collections::HashMap::<u32, usize>::new(); m];
+                for (n, x) in pts.iter().enumerate() {
+                    let a = pred0[n] as usize;
+                    cnt[a] += 1;
+                    err[a] += (p_t[n] - y_t[n]).length();
+                    *maj[a].entry(gl0[n]).or_default() += 1;
+                    let _ = x;
+                }
+                let desc: Vec<String> = (0..m)
+                    .map(|a| {
+                        let g = maj[a].iter().max_by_key(|e| *e.1).map_or(99, |e| *e.0);
+                        format!(
+                            "{a}:{}/{}/{:.1}",
+                            g,
+                            cnt[a],
+                            100.0 * err[a] / cnt[a].max(1) as f64
+                        )
+                    })
+                    .collect();
+                eprintln!("  t{t} parts(gt/n/err): {}", desc.join(" "));
+            }
             if std::env::var("VERBOSE").is_ok() {
                 eprintln!("frame {t}: recon {:.3}", e / pts.len() as f64 * 100.0);
             }

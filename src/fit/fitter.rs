@@ -12,7 +12,9 @@ use super::flow::SceneFlow;
 use super::gaussians::{Gauss, GradAcc, Params, TransferSrc};
 use super::init;
 use super::losses::{chamfer, emd, flow, mle, sep};
+use super::motion_seg::{self, MotionSegOpts};
 use super::pose_init::{self, PoseInitOpts};
+use super::pose_search::{self, PoseSearchOpts};
 use super::schedule::Schedule;
 use crate::geom::assignment::Lap;
 use crate::geom::knn::Grid;
@@ -91,6 +93,15 @@ pub struct FitConfig {
     /// On by default: measured (Fast, m = 12, so101/solo12/finger_edu full) mean
     /// reconstruction error 7.52 → 4.69, flow error 8.16 → 4.55.
     pub pose_init: Option<PoseInitOpts>,
+    /// Global pose search after the pose initialisation
+    /// (`pose_search::search_poses`); full input only. None = off.
+    pub pose_search: Option<PoseSearchOpts>,
+    /// Motion re-segmentation rounds after the pose search
+    /// (`motion_seg::resegment`, each followed by a new search). None = off.
+    pub motion_seg: Option<MotionSegOpts>,
+    /// Cosine decay of the main loop's learning rate down to this fraction of it
+    /// (None = constant, as in the paper).
+    pub lr_decay: Option<f64>,
 }
 
 impl FitConfig {
@@ -104,6 +115,9 @@ impl FitConfig {
             track_init: false,
             track_iters: 100,
             pose_init: Some(PoseInitOpts::default()),
+            pose_search: Some(PoseSearchOpts::default()),
+            motion_seg: Some(MotionSegOpts::default()),
+            lr_decay: None,
             report_every: 10,
             snapshot_every: 50,
         }
@@ -622,8 +636,21 @@ pub fn fit_candidate(
     if let (Some(o), false) = (&cfg.pose_init, cfg.occlusion) {
         pose_init::init_poses(data, &mut params, o, cfg.seed ^ m as u64);
     }
+    if let (Some(o), false) = (&cfg.pose_search, cfg.occlusion) {
+        pose_search::search_poses(data, &mut params, o);
+        if let Some(ms) = &cfg.motion_seg {
+            for _ in 0..ms.rounds {
+                motion_seg::resegment(data, &mut params, ms);
+                pose_search::search_poses(data, &mut params, o);
+            }
+        }
+    }
     adam.reset();
-    adam.lr = sched.lr;
+    let main_lr = match (&cfg.pose_search, cfg.occlusion) {
+        (Some(o), false) => o.main_lr,
+        _ => sched.lr,
+    };
+    adam.lr = main_lr;
     let mut emd_cache: Vec<Option<EmdPair>> = vec![None; if cfg.occlusion { kk } else { kk * kk }];
     let mut plan = PlanB {
         occluded: cfg.occlusion,
@@ -638,6 +665,17 @@ pub fn fit_candidate(
             if o.refine_every > 0 && it > 0 && it % o.refine_every == 0 {
                 pose_init::refine_poses(data, &mut params, o);
             }
+        }
+        if let (Some(o), false) = (&cfg.pose_search, cfg.occlusion) {
+            if o.again_at > 0.0 && it == (o.again_at * sched.iters as f64) as usize {
+                pose_search::search_poses(data, &mut params, o);
+            }
+        }
+        if let Some(floor) = cfg.lr_decay {
+            // Cosine decay: near the optimum Adam's normalised steps on noisy
+            // mini-batch gradients random-walk at the scale of the learning rate.
+            let c = 0.5 * (1.0 + (std::f64::consts::PI * it as f64 / sched.iters as f64).cos());
+            adam.lr = main_lr * (floor + (1.0 - floor) * c);
         }
         let k = rng.random_range(0..kk);
         // Step A.

@@ -104,6 +104,28 @@ pub fn kabsch_trimmed(a: &[DVec3], b: &[DVec3], keep: f64) -> Option<(DMat3, DVe
     Some(fit)
 }
 
+/// Sets Gaussian `i`'s pose in frame `t` to its frame-0 pose `g0` moved by the
+/// rigid motion x ↦ r x + c.
+pub fn set_relative_pose(
+    params: &mut Params,
+    t: usize,
+    i: usize,
+    g0: &Gauss,
+    (r, c): (DMat3, DVec3),
+) {
+    let rt = r * g0.r;
+    let o = params.layout.rot(t, i);
+    params.x[o..o + 6].copy_from_slice(&[
+        rt.x_axis.x,
+        rt.x_axis.y,
+        rt.x_axis.z,
+        rt.y_axis.x,
+        rt.y_axis.y,
+        rt.y_axis.z,
+    ]);
+    params.set_center(t, i, r * g0.mu + c);
+}
+
 /// Sets every frame t ≥ 1's rotations and centres from frame 0's by the tracked
 /// relative poses. Leaves a Gaussian's frame unchanged (copied from the previous
 /// frame's estimate) where too few of its points are tracked.
@@ -170,18 +192,7 @@ pub fn init_poses(data: &Data, params: &mut Params, opts: &PoseInitOpts, seed: u
             }
         }
         for (i, g) in g0.iter().enumerate() {
-            let (r, c) = rel[i];
-            let rt = r * g.r;
-            let o = l.rot(t, i);
-            params.x[o..o + 6].copy_from_slice(&[
-                rt.x_axis.x,
-                rt.x_axis.y,
-                rt.x_axis.z,
-                rt.y_axis.x,
-                rt.y_axis.y,
-                rt.y_axis.z,
-            ]);
-            params.set_center(t, i, r * g.mu + c);
+            set_relative_pose(params, t, i, g, rel[i]);
         }
     }
 }
@@ -250,17 +261,7 @@ pub fn refine_poses(data: &Data, params: &mut Params, opts: &PoseInitOpts) {
                 }
             }
             if score(r, c, t, &groups[i], &mut res) < base {
-                let rt = r * g0[i].r;
-                let o = l.rot(t, i);
-                params.x[o..o + 6].copy_from_slice(&[
-                    rt.x_axis.x,
-                    rt.x_axis.y,
-                    rt.x_axis.z,
-                    rt.y_axis.x,
-                    rt.y_axis.y,
-                    rt.y_axis.z,
-                ]);
-                params.set_center(t, i, r * g0[i].mu + c);
+                set_relative_pose(params, t, i, &g0[i], (r, c));
             }
         }
     }

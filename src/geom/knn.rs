@@ -170,6 +170,39 @@ impl Grid {
         Some(best)
     }
 
+    /// Squared distance from `q` to its nearest indexed point, capped at `cap2`:
+    /// the shell search stops at that radius, so queries far from the cloud (most
+    /// candidate poses of a global search) cost a few cell visits instead of a scan.
+    pub fn nearest_d2_capped(&self, q: Vec3, cap2: f32) -> f32 {
+        if self.pts.is_empty() {
+            return cap2;
+        }
+        // Clamping onto the box is non-expansive: |q − p| ≥ |q_c − p| for indexed p.
+        let qc = q.clamp(self.min, self.max);
+        if q.distance_squared(qc) >= cap2 {
+            return cap2;
+        }
+        let c0 = self.coords(q);
+        let mut dmin = f32::INFINITY;
+        for a in 0..3 {
+            let lo = self.min[a] + c0[a] as f32 * self.cell;
+            dmin = dmin.min(qc[a] - lo).min(lo + self.cell - qc[a]);
+        }
+        let dmin = dmin.max(0.0);
+        let mut best = (u32::MAX, cap2);
+        let maxr = self.dims[0].max(self.dims[1]).max(self.dims[2]);
+        for r in 0..=maxr {
+            if r > 0 {
+                let bound = (r - 1) as f32 * self.cell + dmin;
+                if best.1 <= bound * bound {
+                    break;
+                }
+            }
+            self.visit_shell(c0, r, q, &mut best);
+        }
+        best.1
+    }
+
     #[inline]
     fn visit_cell(&self, c: usize, q: Vec3, best: &mut (u32, f32)) {
         let (s, e) = (self.start[c] as usize, self.start[c + 1] as usize);
@@ -221,6 +254,31 @@ mod tests {
             .iter()
             .map(|p| p.distance_squared(q))
             .fold(f32::INFINITY, f32::min)
+    }
+
+    #[test]
+    fn capped_query_matches_brute_force() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let pts: Vec<Vec3> = (0..2000)
+            .map(|_| {
+                Vec3::new(
+                    rng.random_range(-0.5..0.5),
+                    rng.random_range(-0.1..0.1),
+                    0.0,
+                )
+            })
+            .collect();
+        let g = Grid::new(&pts);
+        for _ in 0..2000 {
+            let q = Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-0.3..0.3),
+            );
+            let cap = 0.01;
+            let want = brute(&pts, q).min(cap);
+            assert_eq!(g.nearest_d2_capped(q, cap), want, "{q:?}");
+        }
     }
 
     #[test]

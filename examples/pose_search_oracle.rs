@@ -1,0 +1,137 @@
+//! Development tool: runs the Step-1 pose initialisation and global pose search with
+//! Gaussians placed on the ground-truth parts of frame 0 (an oracle segmentation),
+//! and prints per frame and part the mean point error (×100) of the found poses
+//! against the ground truth — separating search failures from segmentation ones.
+//!
+//! Usage: `cargo run --release --example pose_search_oracle -- SEQ_DIR [--no-search] [--no-init]`
+
+use std::path::Path;
+
+use glam::{DMat3, DVec3, Vec3};
+use gsart::fit::fitter::Data;
+use gsart::fit::gaussians::Params;
+use gsart::fit::{pose_init, pose_search};
+use gsart::io::gt::GroundTruth;
+use nalgebra::Matrix3;
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let dir = Path::new(&args[0]);
+    let no_search = args.iter().any(|a| a == "--no-search");
+    let no_init = args.iter().any(|a| a == "--no-init");
+    let gt_text = std::fs::read_to_string(dir.join("gt.json")).expect("gt.json");
+    let gt = GroundTruth::from_json(&gt_text, "gt.json").expect("gt");
+    let mut frames = Vec::new();
+    let mut labels0 = Vec::new();
+    for (k, name) in gt.frames.iter().enumerate() {
+        let bytes = std::fs::read(dir.join(name)).expect("ply");
+        let c = gsart::io::ply::read_ply(&bytes, name).expect("ply");
+        if k == 0 {
+            labels0 = c.labels.clone().expect("labels");
+        }
+        frames.push(c.points);
+    }
+    let kk = frames.len();
+    let np = gt.poses[0].len();
+    let data = Data::new(frames.clone());
+    let mut params = Params::new(np, kk);
+    for p in 0..np {
+        let pts: Vec<DVec3> = frames[0]
+            .iter()
+            .zip(&labels0)
+            .filter(|(_, &l)| l as usize == p)
+            .map(|(x, _)| x.as_dvec3())
+            .collect();
+        let c = pts.iter().fold(DVec3::ZERO, |s, x| s + *x) / pts.len().max(1) as f64;
+        let mut cov = Matrix3::<f64>::zeros();
+        for x in &pts {
+            let d = *x - c;
+            let v = nalgebra::Vector3::new(d.x, d.y, d.z);
+            cov += v * v.transpose();
+        }
+        cov /= pts.len().max(1) as f64;
+        let e = cov.symmetric_eigen();
+        let col = |j: usize| {
+            DVec3::new(
+                e.eigenvectors[(0, j)],
+                e.eigenvectors[(1, j)],
+                e.eigenvectors[(2, j)],
+            )
+        };
+        let mut r = DMat3::from_cols(col(0), col(1), col(2));
+        if r.determinant() < 0.0 {
+            r = DMat3::from_cols(col(0), col(1), -col(2));
+        }
+        let s = DVec3::new(e.eigenvalues[0], e.eigenvalues[1], e.eigenvalues[2])
+            .max(DVec3::splat(1e-8));
+        params.set_log_scale(p, DVec3::new(s.x.ln(), s.y.ln(), s.z.ln()) * 0.5);
+        let o = params.layout.rot(0, p);
+        params.x[o..o + 6].copy_from_slice(&[
+            r.x_axis.x, r.x_axis.y, r.x_axis.z, r.y_axis.x, r.y_axis.y, r.y_axis.z,
+        ]);
+        params.set_center(0, p, c);
+    }
+    params.broadcast_frame(0);
+    let t0 = std::time::Instant::now();
+    if !no_init {
+        pose_init::init_poses(&data, &mut params, &Default::default(), 1);
+    }
+    if !no_search {
+        let mut o = pose_search::PoseSearchOpts::default();
+        let get = |k: &str| {
+            args.iter()
+                .position(|a| a == k)
+                .and_then(|i| args.get(i + 1))
+                .and_then(|v| v.parse::<usize>().ok())
+        };
+        o.rotations = get("--rot").unwrap_or(o.rotations);
+        o.top = get("--top").unwrap_or(o.top);
+        o.icp = get("--icp").unwrap_or(o.icp);
+        o.probe = get("--probe").unwrap_or(o.probe);
+        o.pivots = get("--pivots").unwrap_or(o.pivots);
+        pose_search::search_poses(&data, &mut params, &o);
+    }
+    eprintln!("search {:.2} s", t0.elapsed().as_secs_f64());
+    let model = params.to_model();
+    let mut total = 0.0;
+    for t in 1..kk {
+        let mut line = format!("t{t}:");
+        let mut ft = 0.0;
+        for p in 0..np {
+            let pm = model.pose(t, p) * gsart::geom::se3::rigid_inverse(&model.pose(0, p));
+            let gm = gt.poses[t][p] * gsart::geom::se3::rigid_inverse(&gt.poses[0][p]);
+            let (mut e, mut n) = (0.0, 0);
+            for (x, &l) in frames[0].iter().zip(&labels0) {
+                if l as usize == p {
+                    let x: Vec3 = *x;
+                    let x = x.as_dvec3();
+                    e += (pm.transform_point3(x) - gm.transform_point3(x)).length();
+                    n += 1;
+                }
+            }
+            line += &format!(" {:.1}", 100.0 * e / n.max(1) as f64);
+            if std::env::var("SCORES").is_ok() {
+                let g: Vec<DVec3> = frames[0]
+                    .iter()
+                    .zip(&labels0)
+                    .filter(|(_, &l)| l as usize == p)
+                    .map(|(x, _)| x.as_dvec3())
+                    .step_by(4)
+                    .collect();
+                let mo = |m: glam::DMat4| (DMat3::from_mat4(m), m.w_axis.truncate());
+                let mut b = Vec::new();
+                let sp = pose_search::score(&data, t, &g, mo(pm), 0.8, &mut b);
+                let sg = pose_search::score(&data, t, &g, mo(gm), 0.8, &mut b);
+                line += &format!("[{:.2}/{:.2}]", sp * 1e4, sg * 1e4);
+            }
+            ft += e;
+        }
+        total += ft / frames[0].len() as f64;
+        eprintln!("{line}");
+    }
+    println!(
+        "{} mean recon {:.3}",
+        dir.display(),
+        100.0 * total / kk as f64
+    );
+}
