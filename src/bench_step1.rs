@@ -40,6 +40,9 @@ pub struct Step1Bench {
     pub final_chamfer: f64,
     /// FNV-1a of every working-point label, hex (a u64 does not fit a JS number).
     pub labels_hash: String,
+    /// FNV-1a of the generated input points' f32 bits, hex: tells whether a native vs
+    /// wasm difference starts in the data or in the fit.
+    pub input_hash: String,
 }
 
 /// The reference workloads of SPEC §7: (object, frames, points per frame).
@@ -64,14 +67,12 @@ pub fn default_m(name: &str) -> Result<usize> {
     }
 }
 
-fn fnv1a(labels: &[Vec<u32>]) -> u64 {
+fn fnv1a(words: impl Iterator<Item = u32>) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for frame in labels {
-        for &l in frame {
-            for b in l.to_le_bytes() {
-                h ^= b as u64;
-                h = h.wrapping_mul(0x0100_0000_01b3);
-            }
+    for w in words {
+        for b in w.to_le_bytes() {
+            h ^= b as u64;
+            h = h.wrapping_mul(0x0100_0000_01b3);
         }
     }
     h
@@ -149,7 +150,15 @@ pub fn run(
         ms_per_iter: (t_b - t_a) / span as f64,
         ms_finish: t_end - t_b,
         final_chamfer: r.final_chamfer,
-        labels_hash: format!("{:016x}", fnv1a(&r.labels)),
+        labels_hash: format!("{:016x}", fnv1a(r.labels.iter().flatten().copied())),
+        input_hash: format!(
+            "{:016x}",
+            fnv1a(synth.sequence.frames.iter().flat_map(|f| {
+                f.points
+                    .iter()
+                    .flat_map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
+            }))
+        ),
     })
 }
 
