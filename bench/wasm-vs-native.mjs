@@ -124,10 +124,13 @@ try {
       const sameInput = all.every((r) => r.input_hash === nat[0].input_hash);
       const sameLabels = all.every((r) => r.labels_hash === nat[0].labels_hash);
       const deterministic = [nat, was].every((rs) => rs.every((r) => r.final_chamfer === rs[0].final_chamfer));
+      // Against the first wasm build, paired per repetition (they ran back to back).
+      const first = runs.filter((r) => r.workload === w && r.variant === opts.pkgs[0].label);
+      const paired = median(was.map((r, i) => r.ms_per_iter / first[i].ms_per_iter));
       const relDiff = Math.abs(was[0].final_chamfer - nat[0].final_chamfer) / Math.abs(nat[0].final_chamfer);
       rows.push({
         workload: `${w} (${nat[0].object} ${nat[0].frames}×${nat[0].points})`, m: nat[0].m, wasm: p.label,
-        iterations: nat[0].iterations, native_ms_per_iter: nMs, wasm_ms_per_iter: wMs, ratio: wMs / nMs,
+        iterations: nat[0].iterations, native_ms_per_iter: nMs, wasm_ms_per_iter: wMs, ratio: wMs / nMs, vs_first_wasm: paired,
         native_ms_total: median(nat.map((r) => r.ms_total)), wasm_ms_total: median(was.map((r) => r.ms_total)),
         native_final_chamfer: nat[0].final_chamfer, wasm_final_chamfer: was[0].final_chamfer,
         same_input: sameInput, same_labels: sameLabels, deterministic, chamfer_rel_diff: relDiff,
@@ -135,12 +138,12 @@ try {
     }
   }
   console.log(`\nChromium ${chromeVersion}, ${opts.reps} runs each (median), seed ${opts.seed}\n`);
-  console.log('| workload | m | wasm build | iterations | native ms/iter | wasm ms/iter | wasm/native | native total ms | wasm total ms | final Chamfer (native) | wasm − native (relative) | labels identical |');
-  console.log('|---|---|---|---|---|---|---|---|---|---|---|---|');
+  console.log('| workload | m | wasm build | iterations | native ms/iter | wasm ms/iter | wasm/native | vs first wasm build (paired) | native total ms | wasm total ms | final Chamfer (native) | wasm − native (relative) | labels identical |');
+  console.log('|---|---|---|---|---|---|---|---|---|---|---|---|---|');
   for (const r of rows) {
     const diff = r.chamfer_rel_diff === 0 ? '0 (bit-identical)' : r.chamfer_rel_diff.toExponential(1);
     const labels = !r.same_input ? 'INPUT DIFFERS' : r.same_labels ? 'yes' : 'NO';
-    console.log(`| ${r.workload} | ${r.m} | ${r.wasm} | ${r.iterations} | ${r.native_ms_per_iter.toFixed(3)} | ${r.wasm_ms_per_iter.toFixed(3)} | ${r.ratio.toFixed(2)} | ${r.native_ms_total.toFixed(0)} | ${r.wasm_ms_total.toFixed(0)} | ${r.native_final_chamfer.toPrecision(17)} | ${diff} | ${labels}${r.deterministic ? '' : ' (NOT deterministic across runs)'} |`);
+    console.log(`| ${r.workload} | ${r.m} | ${r.wasm} | ${r.iterations} | ${r.native_ms_per_iter.toFixed(3)} | ${r.wasm_ms_per_iter.toFixed(3)} | ${r.ratio.toFixed(2)} | ${r.vs_first_wasm.toFixed(3)} | ${r.native_ms_total.toFixed(0)} | ${r.wasm_ms_total.toFixed(0)} | ${r.native_final_chamfer.toPrecision(17)} | ${diff} | ${labels}${r.deterministic ? '' : ' (NOT deterministic across runs)'} |`);
   }
   if (opts.json) fs.writeFileSync(opts.json, JSON.stringify({ chromium: chromeVersion, opts, rows, runs }, null, 1));
 } finally {
