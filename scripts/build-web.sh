@@ -8,6 +8,16 @@ cd "$(dirname "$0")/.."
 WASM_BINDGEN_VERSION=0.2.130
 OUT=www/pkg
 RAW=target/wasm32-unknown-unknown/release/gsart.wasm
+# GSART_SIMD=1: the wasm simd128 variant, measured by bench/wasm-vs-native.mjs (not the
+# page's build), into target/pkg-simd with its own target dir so the default cache stays.
+SIMD_OPT=()
+if [ "${GSART_SIMD:-0}" = 1 ]; then
+  OUT=target/pkg-simd
+  export CARGO_TARGET_DIR=target/simd
+  export CARGO_TARGET_WASM32_UNKNOWN_UNKNOWN_RUSTFLAGS="-C target-feature=+simd128"
+  RAW=$CARGO_TARGET_DIR/wasm32-unknown-unknown/release/gsart.wasm
+  SIMD_OPT=(--enable-simd)
+fi
 STAMP=$OUT/.built-from
 
 die() { echo "build-web: $*" >&2; exit 1; }
@@ -38,7 +48,7 @@ wasm-bindgen --target web --no-typescript --out-dir "$OUT.tmp" "$RAW"
 
 echo "build-web: wasm-opt -O3"
 # Features the stable wasm32 target emits by default; wasm-opt must be told about them.
-"$WASM_OPT" -O3 \
+"$WASM_OPT" -O3 "${SIMD_OPT[@]}" \
   --enable-bulk-memory --enable-nontrapping-float-to-int --enable-sign-ext \
   --enable-mutable-globals --enable-reference-types --enable-multivalue \
   "$OUT.tmp/gsart_bg.wasm" -o "$OUT.tmp/gsart_bg.opt.wasm"

@@ -196,3 +196,17 @@ pub fn run(workloads: &[String], seqs: &[PathBuf], opts: &FitOptions) -> Result<
         peak_memory_mib: peak_memory_mib(),
     })
 }
+
+/// `gsart bench --step1-only`: [`crate::bench_step1::run`] timed with the wall clock,
+/// on this thread only (one candidate never spawns threads), for the wasm-vs-native
+/// comparison (`bench/wasm-vs-native.mjs`).
+pub fn step1_native(
+    workload: &str,
+    m: usize,
+    iters: usize,
+    seed: u64,
+) -> Result<crate::bench_step1::Step1Bench> {
+    let start = Instant::now();
+    let clock = move || start.elapsed().as_secs_f64() * 1e3;
+    crate::bench_step1::run(workload, m, iters, seed, &clock)
+}

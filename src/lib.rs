@@ -6,6 +6,7 @@
 
 #[cfg(not(target_arch = "wasm32"))]
 pub mod bench;
+pub mod bench_step1;
 pub mod error;
 pub mod eval;
 pub mod fit;

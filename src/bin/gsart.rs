@@ -122,6 +122,16 @@ mod cli {
             /// Write the report as JSON here too.
             #[arg(long)]
             json: Option<PathBuf>,
+            /// Only time Step 1 of one candidate per workload (what one page worker runs),
+            /// on this thread, printing one JSON line each: the native side of
+            /// `bench/wasm-vs-native.mjs`. Uses --iters (default 300), --m, --seed.
+            #[arg(long)]
+            step1_only: bool,
+            /// Candidate part count for --step1-only (default: robot 12, object 5).
+            #[arg(long)]
+            m: Option<usize>,
+            #[arg(long, default_value_t = 0)]
+            seed: u64,
         },
     }
 
@@ -181,11 +191,21 @@ mod cli {
             } => articulate(&result, &states, frame, &out),
             Command::Bench {
                 workload,
+                iters,
+                step1_only: true,
+                m,
+                seed,
+                ..
+            } => bench_step1(&workload, m, iters.unwrap_or(300), seed),
+            Command::Bench {
+                workload,
                 seq,
                 quality,
                 iters,
                 json,
-            } => parse_options(None, iters, &quality, "auto", 0, 4096)
+                seed,
+                ..
+            } => parse_options(None, iters, &quality, "auto", seed, 4096)
                 .and_then(|opts| bench(&workload, &seq, &opts, json.as_deref())),
         };
         match r {
@@ -530,6 +550,26 @@ mod cli {
                 p,
                 &serde_json::to_string_pretty(&report).unwrap_or_default(),
             )?;
+        }
+        Ok(())
+    }
+
+    fn bench_step1(workloads: &[String], m: Option<usize>, iters: usize, seed: u64) -> Result<()> {
+        let all = ["robot".to_string(), "object".to_string()];
+        let names = if workloads.is_empty() {
+            &all[..]
+        } else {
+            workloads
+        };
+        for w in names {
+            let m = match m {
+                Some(m) => m,
+                None => gsart::bench_step1::default_m(w)?,
+            };
+            let r = gsart::bench::step1_native(w, m, iters, seed)?;
+            let line = serde_json::to_string(&r)
+                .map_err(|e| Error::InvalidArgument(format!("internal: {e}")))?;
+            println!("{line}");
         }
         Ok(())
     }
