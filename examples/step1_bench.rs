@@ -52,9 +52,9 @@ fn main() {
     let mut emd_n: Option<usize> = None;
     let mut refresh: Option<usize> = None;
     let mut pose: Option<gsart::fit::pose_init::PoseInitOpts> = Some(Default::default());
-    let mut search: Option<gsart::fit::pose_search::PoseSearchOpts> = Some(Default::default());
+    let mut search: Option<gsart::fit::pose_search::PoseSearchOpts> = None;
     let mut decay: Option<f64> = None;
-    let mut mseg: Option<gsart::fit::motion_seg::MotionSegOpts> = Some(Default::default());
+    let mut mseg: Option<gsart::fit::motion_seg::MotionSegOpts> = None;
     let mut i = 0;
     while i < args.len() {
         let a = args[i].as_str();
@@ -104,6 +104,13 @@ fn main() {
                     o.rounds = val().parse().expect("ms-rounds")
                 }
             }
+            "--ms-every" => {
+                if let Some(o) = mseg.as_mut() {
+                    o.every = val().parse().expect("ms-every")
+                }
+            }
+            "--ms-on" => mseg = Some(Default::default()),
+            "--ps-on" => search = Some(Default::default()),
             "--ms-near" => {
                 if let Some(o) = mseg.as_mut() {
                     o.nearest = val().parse().expect("ms-near")
@@ -132,6 +139,11 @@ fn main() {
             "--ps-ficp" => {
                 if let Some(o) = search.as_mut() {
                     o.final_icp = val().parse().expect("ps-ficp")
+                }
+            }
+            "--ps-keep" => {
+                if let Some(o) = search.as_mut() {
+                    o.keep_ratio = val().parse().expect("ps-keep")
                 }
             }
             "--ps-again" => {

@@ -113,7 +113,7 @@ mod cli {
             #[arg(long, value_delimiter = ',')]
             workload: Vec<String>,
             /// Extra sequence folders to fit and evaluate (e.g. ../shared/bench-dev/full/*).
-            #[arg(long)]
+            #[arg(long, num_args = 1..)]
             seq: Vec<PathBuf>,
             #[arg(long, default_value = "balanced")]
             quality: String,

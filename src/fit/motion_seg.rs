@@ -29,6 +29,8 @@ pub struct MotionSegOpts {
     pub min_points: usize,
     /// Rounds of re-segmentation, each followed by a new pose search.
     pub rounds: usize,
+    /// Also re-segment every this many main-loop iterations (0 = never).
+    pub every: usize,
 }
 
 impl Default for MotionSegOpts {
@@ -39,6 +41,7 @@ impl Default for MotionSegOpts {
             cap2: 0.01,
             min_points: 8,
             rounds: 2,
+            every: 0,
         }
     }
 }
