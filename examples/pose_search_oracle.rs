@@ -89,7 +89,16 @@ fn main() {
         o.icp = get("--icp").unwrap_or(o.icp);
         o.probe = get("--probe").unwrap_or(o.probe);
         o.pivots = get("--pivots").unwrap_or(o.pivots);
-        pose_search::search_poses(&data, &mut params, &o);
+        o.exclusive = !args.iter().any(|a| a == "--no-excl");
+        let getf = |k: &str| {
+            args.iter()
+                .position(|a| a == k)
+                .and_then(|i| args.get(i + 1))
+                .and_then(|v| v.parse::<f64>().ok())
+        };
+        o.keep_ratio = getf("--keep").unwrap_or(o.keep_ratio);
+        o.rigid_ratio = getf("--rigid").unwrap_or(o.rigid_ratio);
+        pose_search::search_poses(&data, &mut params, &o, &mut |_| Ok(())).expect("search");
     }
     eprintln!("search {:.2} s", t0.elapsed().as_secs_f64());
     let model = params.to_model();
@@ -120,8 +129,9 @@ fn main() {
                     .collect();
                 let mo = |m: glam::DMat4| (DMat3::from_mat4(m), m.w_axis.truncate());
                 let mut b = Vec::new();
-                let sp = pose_search::score(&data, t, &g, mo(pm), 0.8, &mut b);
-                let sg = pose_search::score(&data, t, &g, mo(gm), 0.8, &mut b);
+                let tg = pose_search::Target::frame(&data, t);
+                let sp = pose_search::score(&tg, &g, mo(pm), 0.8, &mut b);
+                let sg = pose_search::score(&tg, &g, mo(gm), 0.8, &mut b);
                 line += &format!("[{:.2}/{:.2}]", sp * 1e4, sg * 1e4);
             }
             ft += e;

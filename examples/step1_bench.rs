@@ -52,9 +52,8 @@ fn main() {
     let mut emd_n: Option<usize> = None;
     let mut refresh: Option<usize> = None;
     let mut pose: Option<gsart::fit::pose_init::PoseInitOpts> = Some(Default::default());
-    let mut search: Option<gsart::fit::pose_search::PoseSearchOpts> = None;
-    let mut decay: Option<f64> = None;
-    let mut mseg: Option<gsart::fit::motion_seg::MotionSegOpts> = None;
+    let mut search: Option<gsart::fit::pose_search::PoseSearchOpts> = Some(Default::default());
+    let mut mseg: Option<gsart::fit::motion_seg::MotionSegOpts> = Some(Default::default());
     let mut i = 0;
     while i < args.len() {
         let a = args[i].as_str();
@@ -98,15 +97,9 @@ fn main() {
             "--no-pose-init" => pose = None,
             "--no-search" => search = None,
             "--no-mseg" => mseg = None,
-            "--decay" => decay = Some(val().parse().expect("decay")),
             "--ms-rounds" => {
                 if let Some(o) = mseg.as_mut() {
                     o.rounds = val().parse().expect("ms-rounds")
-                }
-            }
-            "--ms-every" => {
-                if let Some(o) = mseg.as_mut() {
-                    o.every = val().parse().expect("ms-every")
                 }
             }
             "--ms-on" => mseg = Some(Default::default()),
@@ -146,9 +139,9 @@ fn main() {
                     o.keep_ratio = val().parse().expect("ps-keep")
                 }
             }
-            "--ps-again" => {
+            "--ps-no-excl" => {
                 if let Some(o) = search.as_mut() {
-                    o.again_at = val().parse().expect("ps-again")
+                    o.exclusive = false
                 }
             }
             "--ps-pivots" => {
@@ -189,7 +182,6 @@ fn main() {
                 cfg.pose_init = pose;
                 cfg.pose_search = search;
                 cfg.motion_seg = mseg;
-                cfg.lr_decay = decay;
                 if let Some(v) = lr {
                     cfg.sched.lr = v;
                     if let Some(o) = cfg.pose_search.as_mut() {

@@ -94,18 +94,14 @@ pub struct FitConfig {
     /// reconstruction error 7.52 → 4.69, flow error 8.16 → 4.55.
     pub pose_init: Option<PoseInitOpts>,
     /// Global pose search after the pose initialisation
-    /// (`pose_search::search_poses`); full input only. None = off (the default:
-    /// with the true part count it lowered the mean Step-1 reconstruction error on
-    /// bench-dev full from 7.3 to 4.0–6.0 depending on settings, but end to end
-    /// with model selection it did not help, 7.29 vs 6.89, and it flips symmetric
-    /// pieces such as a laptop lid — see the module doc).
+    /// (`pose_search::search_poses`); full (non-occluded) input only. None = off.
+    /// On by default: measured (Fast, true part count, bench-dev full) mean Step-1
+    /// reconstruction error 7.30 → 1.59 before the main loop.
     pub pose_search: Option<PoseSearchOpts>,
     /// Motion re-segmentation rounds after the pose search
-    /// (`motion_seg::resegment`, each followed by a new search). None = off.
+    /// (`motion_seg::resegment`, each followed by a new search); used only with
+    /// `pose_search`. None = off.
     pub motion_seg: Option<MotionSegOpts>,
-    /// Cosine decay of the main loop's learning rate down to this fraction of it
-    /// (None = constant, as in the paper).
-    pub lr_decay: Option<f64>,
 }
 
 impl FitConfig {
@@ -119,9 +115,8 @@ impl FitConfig {
             track_init: false,
             track_iters: 100,
             pose_init: Some(PoseInitOpts::default()),
-            pose_search: None,
-            motion_seg: None,
-            lr_decay: None,
+            pose_search: Some(PoseSearchOpts::default()),
+            motion_seg: Some(MotionSegOpts::default()),
             report_every: 10,
             snapshot_every: 50,
         }
@@ -641,12 +636,30 @@ pub fn fit_candidate(
         pose_init::init_poses(data, &mut params, o, cfg.seed ^ m as u64);
     }
     if let (Some(o), false) = (&cfg.pose_search, cfg.occlusion) {
-        pose_search::search_poses(data, &mut params, o);
-        if let Some(ms) = &cfg.motion_seg {
-            for _ in 0..ms.rounds {
-                motion_seg::resegment(data, &mut params, ms);
-                pose_search::search_poses(data, &mut params, o);
+        let rounds = cfg.motion_seg.as_ref().map_or(0, |ms| ms.rounds);
+        let total = (rounds + 1) * m;
+        for round in 0..=rounds {
+            if round > 0 {
+                if let Some(ms) = &cfg.motion_seg {
+                    motion_seg::resegment(data, &mut params, ms);
+                }
             }
+            // Progress (and a chance to cancel) after every Gaussian searched.
+            let mut tick = |done: usize| -> Result<()> {
+                let p = Progress {
+                    stage: Stage::Init,
+                    m: Some(m),
+                    iter: round * m + done,
+                    total,
+                    losses: Vec::new(),
+                    snapshot: None,
+                };
+                match cb(&p) {
+                    Control::Cancel => Err(Error::Cancelled),
+                    Control::Continue => Ok(()),
+                }
+            };
+            pose_search::search_poses(data, &mut params, o, &mut tick)?;
         }
     }
     adam.reset();
@@ -669,22 +682,6 @@ pub fn fit_candidate(
             if o.refine_every > 0 && it > 0 && it % o.refine_every == 0 {
                 pose_init::refine_poses(data, &mut params, o);
             }
-        }
-        if let (Some(ms), false) = (&cfg.motion_seg, cfg.occlusion) {
-            if ms.every > 0 && it > 0 && it % ms.every == 0 {
-                motion_seg::resegment(data, &mut params, ms);
-            }
-        }
-        if let (Some(o), false) = (&cfg.pose_search, cfg.occlusion) {
-            if o.again_at > 0.0 && it == (o.again_at * sched.iters as f64) as usize {
-                pose_search::search_poses(data, &mut params, o);
-            }
-        }
-        if let Some(floor) = cfg.lr_decay {
-            // Cosine decay: near the optimum Adam's normalised steps on noisy
-            // mini-batch gradients random-walk at the scale of the learning rate.
-            let c = 0.5 * (1.0 + (std::f64::consts::PI * it as f64 / sched.iters as f64).cos());
-            adam.lr = main_lr * (floor + (1.0 - floor) * c);
         }
         let k = rng.random_range(0..kk);
         // Step A.

@@ -29,8 +29,6 @@ pub struct MotionSegOpts {
     pub min_points: usize,
     /// Rounds of re-segmentation, each followed by a new pose search.
     pub rounds: usize,
-    /// Also re-segment every this many main-loop iterations (0 = never).
-    pub every: usize,
 }
 
 impl Default for MotionSegOpts {
@@ -41,7 +39,6 @@ impl Default for MotionSegOpts {
             cap2: 0.01,
             min_points: 8,
             rounds: 2,
-            every: 0,
         }
     }
 }

@@ -23,7 +23,10 @@
 //! (`FitConfig::pose_search`).
 //! Runs before the main loop (allocations outside the hot path).
 
-use glam::{DMat3, DQuat, DVec3};
+use glam::{DMat3, DQuat, DVec3, Vec3};
+
+use crate::geom::knn::Grid;
+use crate::Result;
 
 use super::fitter::Data;
 use super::gaussians::{argmin_maha, Gauss, Params};
@@ -48,14 +51,12 @@ pub struct PoseSearchOpts {
     pub keep: f64,
     /// Posed neighbours whose contact points serve as pivots (strongest first).
     pub pivots: usize,
-    /// Search again after this fraction of the main iterations, when the
-    /// segmentation has settled (0 = only before the main loop).
-    pub again_at: f64,
     /// Main-loop learning rate when the poses come from the search (instead of
     /// the paper's 2e-3): the loop then only polishes, and Adam's normalised
     /// steps random-walk at the scale of the rate. Measured (Fast, m = true part
-    /// count, 7 bench-dev full sequences): mean reconstruction error 4.64 at
-    /// 2e-3, 4.01 at 5e-4 (3.27 with no main loop at all).
+    /// count, bench-dev full): mean reconstruction error 1.59 with no main loop,
+    /// 2.36 after it at 5e-4; on laikago/solo12/talos/finger_edu 1.76 at 1e-4
+    /// vs 1.64 without the loop and 3.04 at 5e-4.
     pub main_lr: f64,
     /// A Gaussian keeps its strongest neighbour's motion when that fits within
     /// this factor of the best found score (0 = off).
@@ -63,6 +64,9 @@ pub struct PoseSearchOpts {
     /// The current (tracked) pose is kept when it fits within this factor of the
     /// best found score (0 = off).
     pub keep_ratio: f64,
+    /// Later Gaussians are matched only to frame points not explained by the
+    /// Gaussians posed before them.
+    pub exclusive: bool,
 }
 
 impl Default for PoseSearchOpts {
@@ -76,10 +80,10 @@ impl Default for PoseSearchOpts {
             final_icp: 6,
             keep: 0.8,
             pivots: 1,
-            again_at: 0.0,
-            main_lr: 5e-4,
+            main_lr: 1e-4,
             rigid_ratio: 1.5,
             keep_ratio: 1.25,
+            exclusive: true,
         }
     }
 }
@@ -105,20 +109,64 @@ pub fn uniform_rotations(n: usize) -> Vec<DMat3> {
 /// A rigid motion x ↦ r x + c.
 pub type Motion = (DMat3, DVec3);
 
+/// The target cloud of one frame for the search: the frame's points not yet
+/// claimed by an already posed Gaussian (all of them without `exclusive`).
+pub struct Target {
+    pts: Vec<DVec3>,
+    grid: Grid,
+    /// Per frame point: still free.
+    free: Vec<bool>,
+}
+
+impl Target {
+    /// All of frame `t`'s points.
+    pub fn frame(data: &Data, t: usize) -> Self {
+        Target {
+            pts: data.frames[t].clone(),
+            grid: data.grids[t].clone(),
+            free: vec![true; data.frames[t].len()],
+        }
+    }
+
+    /// Removes the frame points within `r` of `moved` (a posed Gaussian's points)
+    /// and re-indexes the rest; keeps everything when too few would remain.
+    fn claim(&mut self, data: &Data, t: usize, moved: &[DVec3], r: f64) {
+        if moved.is_empty() {
+            return;
+        }
+        let m32: Vec<Vec3> = moved.iter().map(|p| p.as_vec3()).collect();
+        let g = Grid::new(&m32);
+        let r2 = (r * r) as f32;
+        let mut free = self.free.clone();
+        for (j, y) in data.frames32[t].iter().enumerate() {
+            if free[j] && g.nearest_d2_capped(*y, r2) < r2 {
+                free[j] = false;
+            }
+        }
+        let left = free.iter().filter(|f| **f).count();
+        if left < data.frames[t].len() / 10 {
+            return;
+        }
+        self.free = free;
+        self.pts.clear();
+        let mut p32 = Vec::with_capacity(left);
+        for (j, f) in self.free.iter().enumerate() {
+            if *f {
+                self.pts.push(data.frames[t][j]);
+                p32.push(data.frames32[t][j]);
+            }
+        }
+        self.grid.rebuild(&p32);
+    }
+}
+
 /// Trimmed mean squared distance (each capped at `CAP2`) from the moved points to
-/// frame `t`'s cloud.
-pub fn score(
-    data: &Data,
-    t: usize,
-    pts: &[DVec3],
-    mo: Motion,
-    keep: f64,
-    buf: &mut Vec<f64>,
-) -> f64 {
+/// the target.
+pub fn score(tg: &Target, pts: &[DVec3], mo: Motion, keep: f64, buf: &mut Vec<f64>) -> f64 {
     buf.clear();
     for p in pts {
         let x = mo.0 * *p + mo.1;
-        buf.push(data.grids[t].nearest_d2_capped(x.as_vec3(), CAP2 as f32) as f64);
+        buf.push(tg.grid.nearest_d2_capped(x.as_vec3(), CAP2 as f32) as f64);
     }
     if buf.is_empty() {
         return f64::INFINITY;
@@ -128,16 +176,17 @@ pub fn score(
     buf[..kept].iter().sum::<f64>() / kept as f64
 }
 
-/// Trimmed ICP of `pts` to frame `t` from `mo`.
-fn icp(data: &Data, t: usize, pts: &[DVec3], mut mo: Motion, rounds: usize, keep: f64) -> Motion {
+/// Trimmed ICP of `pts` to the target from `mo`.
+fn icp(tg: &Target, pts: &[DVec3], mut mo: Motion, rounds: usize, keep: f64) -> Motion {
     let mut dst = Vec::with_capacity(pts.len());
     for _ in 0..rounds {
         dst.clear();
         for p in pts {
             let x = mo.0 * *p + mo.1;
-            let q = data.grids[t]
+            let q = tg
+                .grid
                 .nearest(x.as_vec3())
-                .map_or(x, |(j, _)| data.frames[t][j as usize]);
+                .map_or(x, |(j, _)| tg.pts[j as usize]);
             dst.push(q);
         }
         match kabsch_trimmed(pts, &dst, keep) {
@@ -217,16 +266,17 @@ fn contacts(groups: &[Vec<DVec3>]) -> Contacts {
             };
             d2[i][j] = dd;
             d2[j][i] = dd;
-            b[i][j] = c;
-            b[j][i] = c;
+            // The pivot: the mean contact midpoint, else the closest pair's.
             let n = w[i][j] + w[j][i];
-            if n > 0 {
-                let c = (b[i][j] + b[j][i]) / n as f64;
-                w[i][j] = n;
-                w[j][i] = n;
-                b[i][j] = c;
-                b[j][i] = c;
-            }
+            let pivot = if n > 0 {
+                (b[i][j] + b[j][i]) / n as f64
+            } else {
+                c
+            };
+            w[i][j] = n;
+            w[j][i] = n;
+            b[i][j] = pivot;
+            b[j][i] = pivot;
         }
     }
     Contacts { w, b, d2 }
@@ -239,13 +289,19 @@ fn current(g0: &Gauss, gt: &Gauss) -> Motion {
 }
 
 /// Searches every Gaussian's pose in frames t ≥ 1 (see the module doc) and writes
-/// the chosen ones into `params`; frame 0 is left unchanged.
+/// the chosen ones into `params`; frame 0 is left unchanged. `tick(done)` is called
+/// after each Gaussian; an error from it (a cancel) stops the search.
 #[allow(clippy::needless_range_loop)] // t indexes frames in several arrays
-pub fn search_poses(data: &Data, params: &mut Params, opts: &PoseSearchOpts) {
+pub fn search_poses(
+    data: &Data,
+    params: &mut Params,
+    opts: &PoseSearchOpts,
+    tick: &mut dyn FnMut(usize) -> Result<()>,
+) -> Result<()> {
     let kk = data.k();
     let m = params.layout.m;
     if kk < 2 || m == 0 || data.frames[0].is_empty() {
-        return;
+        return Ok(());
     }
     let mut g0: Vec<Gauss> = Vec::new();
     params.frame_into(0, &mut g0);
@@ -273,6 +329,7 @@ pub fn search_poses(data: &Data, params: &mut Params, opts: &PoseSearchOpts) {
     let mut rel: Vec<Vec<Motion>> = (0..m)
         .map(|i| (0..kk).map(|t| current(&g0[i], &gts[t][i])).collect())
         .collect();
+    let mut targets: Vec<Target> = (0..kk).map(|t| Target::frame(data, t)).collect();
     // Root: among Gaussians with at least half the median point count, the one
     // whose best of {identity, current} fits best over the frames.
     let mut sizes: Vec<usize> = groups.iter().map(Vec::len).collect();
@@ -284,8 +341,8 @@ pub fn search_poses(data: &Data, params: &mut Params, opts: &PoseSearchOpts) {
         let mut s = 0.0;
         for t in 1..kk {
             let id = (DMat3::IDENTITY, DVec3::ZERO);
-            let a = score(data, t, &groups[i], id, opts.keep, &mut buf);
-            let b = score(data, t, &groups[i], rel[i][t], opts.keep, &mut buf);
+            let a = score(&targets[t], &groups[i], id, opts.keep, &mut buf);
+            let b = score(&targets[t], &groups[i], rel[i][t], opts.keep, &mut buf);
             s += a.min(b);
         }
         if s < root_score {
@@ -293,7 +350,7 @@ pub fn search_poses(data: &Data, params: &mut Params, opts: &PoseSearchOpts) {
             root = Some(i);
         }
     }
-    let Some(root) = root else { return };
+    let Some(root) = root else { return Ok(()) };
     // Refined candidates per Gaussian and frame, best alone first.
     let mut pool: Vec<Vec<Vec<Motion>>> = (0..m)
         .map(|i| (0..kk).map(|t| vec![rel[i][t]]).collect())
@@ -303,14 +360,27 @@ pub fn search_poses(data: &Data, params: &mut Params, opts: &PoseSearchOpts) {
     for t in 1..kk {
         let id = (DMat3::IDENTITY, DVec3::ZERO);
         let cands = [id, rel[root][t]];
-        pool[root][t] = refine_all(data, t, &groups[root], &cands, opts, &mut buf);
+        pool[root][t] = refine_all(&targets[t], &groups[root], &cands, opts, &mut buf);
         rel[root][t] = pool[root][t][0];
+        if opts.exclusive {
+            claim(
+                &mut targets[t],
+                data,
+                t,
+                &groups[root],
+                rel[root][t],
+                opts,
+                &mut buf,
+            );
+        }
     }
     // Prim order over contact weights.
     for _ in 1..m {
-        // Strongest contact with the posed set first; without any contact, the
-        // Gaussian closest to it.
-        let key = |j: usize| {
+        // Strongest contact with the posed set first (ties: lowest index); without
+        // any contact, the Gaussian closest to it.
+        let mut next = None;
+        let mut best = (0usize, f64::NEG_INFINITY);
+        for j in (0..m).filter(|&j| !posed[j]) {
             let w = (0..m)
                 .filter(|&i| posed[i])
                 .map(|i| con.w[i][j])
@@ -320,15 +390,14 @@ pub fn search_poses(data: &Data, params: &mut Params, opts: &PoseSearchOpts) {
                 .filter(|&i| posed[i])
                 .map(|i| con.d2[i][j])
                 .fold(f64::INFINITY, f64::min);
-            (w, -d)
-        };
-        let Some(j) = (0..m).filter(|&j| !posed[j]).max_by(|&a, &b| {
-            let (ka, kb) = (key(a), key(b));
-            ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
-        }) else {
-            break;
-        };
+            if next.is_none() || w > best.0 || (w == best.0 && w == 0 && -d > best.1) {
+                best = (w, -d);
+                next = Some(j);
+            }
+        }
+        let Some(j) = next else { break };
         posed[j] = true;
+        tick(posed.iter().filter(|p| **p).count())?;
         if groups[j].len() < 3 {
             continue;
         }
@@ -359,16 +428,17 @@ pub fn search_poses(data: &Data, params: &mut Params, opts: &PoseSearchOpts) {
                     cands.push((*r, moved - *r * pivot));
                 }
             }
-            let mut found = search_one(data, t, &groups[j], &probe, &cands, opts, &mut buf);
+            let tg = &targets[t];
+            let mut found = search_one(tg, &groups[j], &probe, &cands, opts, &mut buf);
             // Occam: move rigidly with the strongest touching neighbour unless the
             // search found a clearly better fit. Symmetric pieces (a half of a
             // cylindrical link) otherwise take any of their equally good poses, and
             // Gaussians of one part get different motions that the merge of Step 2
             // cannot reunite.
-            let s_best = score(data, t, &groups[j], found[0], opts.keep, &mut buf);
+            let s_best = score(tg, &groups[j], found[0], opts.keep, &mut buf);
             if let (Some(&i), true) = (nbrs.first(), opts.rigid_ratio > 0.0) {
                 if con.w[i][j] > 0 {
-                    let s_nb = score(data, t, &groups[j], rel[i][t], opts.keep, &mut buf);
+                    let s_nb = score(tg, &groups[j], rel[i][t], opts.keep, &mut buf);
                     if s_nb <= opts.rigid_ratio * s_best {
                         found.insert(0, rel[i][t]);
                     }
@@ -377,12 +447,23 @@ pub fn search_poses(data: &Data, params: &mut Params, opts: &PoseSearchOpts) {
             // Temporal consistency: the tracked pose stays unless clearly beaten, so
             // a symmetric piece (a flat lid) is not flipped onto an equally good but
             // wrong pose.
-            let s_cur = score(data, t, &groups[j], cands[0], opts.keep, &mut buf);
+            let s_cur = score(tg, &groups[j], cands[0], opts.keep, &mut buf);
             if opts.keep_ratio > 0.0 && s_cur <= opts.keep_ratio * s_best {
                 found.insert(0, cands[0]);
             }
             rel[j][t] = found[0];
             pool[j][t] = found;
+            if opts.exclusive {
+                claim(
+                    &mut targets[t],
+                    data,
+                    t,
+                    &groups[j],
+                    rel[j][t],
+                    opts,
+                    &mut buf,
+                );
+            }
         }
     }
     for t in 1..kk {
@@ -393,13 +474,44 @@ pub fn search_poses(data: &Data, params: &mut Params, opts: &PoseSearchOpts) {
             set_relative_pose(params, t, i, &g0[i], frame_pool[i][sel[i]]);
         }
     }
+    Ok(())
+}
+
+/// Marks the frame points explained by Gaussian points `pts` moved by `mo` as
+/// taken: within 3× their median residual (clamped to 0.01–0.05), so later
+/// Gaussians cannot also land on them (a small flat piece otherwise fits anywhere
+/// on another part's surface).
+fn claim(
+    tg: &mut Target,
+    data: &Data,
+    t: usize,
+    pts: &[DVec3],
+    mo: Motion,
+    _opts: &PoseSearchOpts,
+    buf: &mut Vec<f64>,
+) {
+    let moved: Vec<DVec3> = pts.iter().map(|p| mo.0 * *p + mo.1).collect();
+    buf.clear();
+    buf.extend(
+        moved
+            .iter()
+            .map(|x| tg.grid.nearest_d2_capped(x.as_vec3(), CAP2 as f32) as f64),
+    );
+    if buf.is_empty() {
+        return;
+    }
+    let mid = buf.len() / 2;
+    let med = buf
+        .select_nth_unstable_by(mid, |a, b| a.total_cmp(b))
+        .1
+        .sqrt();
+    tg.claim(data, t, &moved, (3.0 * med).clamp(0.01, 0.05));
 }
 
 /// ICP-refines each candidate on at most `REFINE_PTS` of the points, then the
 /// best once more on all of them; returns the refined motions, best first.
 fn refine_all(
-    data: &Data,
-    t: usize,
+    tg: &Target,
     pts: &[DVec3],
     cands: &[Motion],
     opts: &PoseSearchOpts,
@@ -410,14 +522,14 @@ fn refine_all(
     let mut out: Vec<(f64, Motion)> = cands
         .iter()
         .map(|c| {
-            let r = icp(data, t, &small, *c, opts.icp, opts.keep);
-            (score(data, t, &small, r, opts.keep, buf), r)
+            let r = icp(tg, &small, *c, opts.icp, opts.keep);
+            (score(tg, &small, r, opts.keep, buf), r)
         })
         .collect();
     out.sort_by(|a, b| a.0.total_cmp(&b.0));
     // The winner is refined on all points.
     if let Some(first) = out.first_mut() {
-        first.1 = icp(data, t, pts, first.1, opts.final_icp, opts.keep);
+        first.1 = icp(tg, pts, first.1, opts.final_icp, opts.keep);
     }
     out.into_iter().map(|(_, r)| r).collect()
 }
@@ -428,8 +540,7 @@ const REFINE_PTS: usize = 96;
 /// Coarse-scores all candidates on the probe points and ICP-refines the `top`
 /// best plus the first candidate (the current pose, always kept).
 fn search_one(
-    data: &Data,
-    t: usize,
+    tg: &Target,
     pts: &[DVec3],
     probe: &[DVec3],
     cands: &[Motion],
@@ -445,7 +556,7 @@ fn search_one(
         let mut sum = 0.0;
         for p in probe {
             let x = c.0 * *p + c.1;
-            sum += data.grids[t].nearest_d2_capped(x.as_vec3(), CAP2 as f32) as f64;
+            sum += tg.grid.nearest_d2_capped(x.as_vec3(), CAP2 as f32) as f64;
             if sum >= bound {
                 break;
             }
@@ -461,12 +572,12 @@ fn search_one(
     }
     let mut chosen: Vec<Motion> = vec![cands[0]];
     chosen.extend(scored.iter().map(|&(_, n)| cands[n]));
-    refine_all(data, t, pts, &chosen, opts, buf)
+    refine_all(tg, pts, &chosen, opts, buf)
 }
 
 /// Factor by which another candidate must beat the preferred one in the coverage
 /// selection.
-const SWITCH_MARGIN: f64 = 1.05;
+const SWITCH_MARGIN: f64 = 1.0;
 
 /// Squared distances are capped here (normalised units) so one far-off point does
 /// not dominate the coverage score.
@@ -626,8 +737,9 @@ pub(crate) mod tests {
 
     #[test]
     fn finds_a_large_rotation_about_the_contact() {
-        // The arm turns by 150° and −120°: far outside any local method's reach.
-        let angles = [0.0, 2.6, -2.1];
+        // The arm turns by 109° and −115° (without passing through the base): far outside
+        // any local method's reach.
+        let angles = [0.0, 1.9, -2.0];
         let frames: Vec<(Vec<Vec3>, Vec<u32>)> = angles
             .iter()
             .enumerate()
@@ -640,7 +752,7 @@ pub(crate) mod tests {
             final_icp: 24,
             ..Default::default()
         };
-        search_poses(&data, &mut params, &opts);
+        search_poses(&data, &mut params, &opts, &mut |_| Ok(())).unwrap();
         for (t, a) in angles.iter().enumerate().skip(1) {
             let want = DMat3::from_axis_angle(DVec3::Z, *a);
             let (base, arm) = (params.gauss(t, 0), params.gauss(t, 1));
