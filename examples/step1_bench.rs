@@ -139,6 +139,11 @@ fn main() {
                     o.keep_ratio = val().parse().expect("ps-keep")
                 }
             }
+            "--ps-snap" => {
+                if let Some(o) = search.as_mut() {
+                    o.snap_ratio = val().parse().expect("ps-snap")
+                }
+            }
             "--ps-no-excl" => {
                 if let Some(o) = search.as_mut() {
                     o.exclusive = false
@@ -218,6 +223,38 @@ fn main() {
             None => gsart::pipeline::fit_step1(&seq, &opts, &|_| Control::Continue).expect("fit"),
         };
         let secs = t0.elapsed().as_secs_f64();
+        if std::env::var("VERBOSE").as_deref() == Ok("3") {
+            // L_merge between Gaussians with the same / different majority GT part.
+            let gl0 = seq.frames[0].labels.as_ref().expect("labels");
+            let lab0 = res.model.segment(0, &seq.frames[0].points);
+            let m = res.model.m;
+            let mut maj = vec![std::collections::HashMap::<u32, usize>::new(); m];
+            for (a, g) in lab0.iter().zip(gl0) {
+                *maj[*a as usize].entry(*g).or_default() += 1;
+            }
+            let major: Vec<u32> = maj
+                .iter()
+                .map(|h| h.iter().max_by_key(|e| *e.1).map_or(u32::MAX, |e| *e.0))
+                .collect();
+            let poses: Vec<Vec<glam::DMat4>> = (0..seq.frames.len())
+                .map(|t| (0..m).map(|i| res.model.pose(t, i)).collect())
+                .collect();
+            let (mut same, mut diff) = (Vec::new(), f64::INFINITY);
+            for i in 0..m {
+                for j in (i + 1)..m {
+                    let l = gsart::kinematics::merge::merge_loss(&poses, i, j);
+                    if major[i] == major[j] {
+                        same.push(format!("{i}-{j}(p{}):{l:.4}", major[i]));
+                    } else {
+                        diff = diff.min(l);
+                    }
+                }
+            }
+            eprintln!(
+                "same-part L_merge: {} | min different-part {diff:.4}",
+                same.join(" ")
+            );
+        }
         let kk = seq.frames.len();
         // Mean RI over frames.
         let mut ri = 0.0;

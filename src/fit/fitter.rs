@@ -791,6 +791,11 @@ pub fn fit_candidate(
         }
     }
     stats.last = named(lm, ls, &lb);
+    if let (Some(o), false) = (&cfg.pose_search, cfg.occlusion) {
+        if o.snap_ratio > 0.0 {
+            pose_search::snap_rigid(data, &mut params, o.points, o.snap_ratio, o.keep);
+        }
+    }
     Ok((params, stats))
 }
 

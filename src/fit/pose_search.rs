@@ -13,14 +13,17 @@
 //! they fit nearly as well, and a coordinate descent on the bidirectional Chamfer of
 //! all moved Gaussians picks one candidate per Gaussian and frame.
 //!
-//! Status (measured, bench-dev full, Fast): with Gaussians placed on the true parts
-//! (`examples/pose_search_oracle.rs`) it brings the mean reconstruction error of the
-//! poses from 3.0–7.2 to 0.6–3.0 on every sequence; with the fitted segmentation and
-//! the true part count, 7.3 → 4.0–6.0 depending on settings; end to end with model
-//! selection over 10–15 Gaussians it did not help (7.29 vs 6.89), because small or
-//! flat Gaussians (a half link, a laptop lid) fit equally well in several poses and
-//! the one-sided score cannot tell them apart. It is therefore off by default
-//! (`FitConfig::pose_search`).
+//! Later Gaussians are matched only to the frame points that the Gaussians posed
+//! before them do not explain (`exclusive`): a small or flat piece otherwise fits
+//! equally well on another part's surface. After the main loop, `snap_rigid` gives
+//! touching Gaussians that move as one body exactly one motion, so the merge of
+//! Step 2 joins them.
+//!
+//! Measured (bench-dev full, Fast): with Gaussians placed on the true parts
+//! (`examples/pose_search_oracle.rs`) the mean pose error of xarm7 / so101 /
+//! finger_edu / talos is 0.7 / 1.2 / 1.0 / 1.0 (22.2 / 7.2 / 6.6 / 4.9 with tracking
+//! alone); with the fitted segmentation and the true part count, the mean over the
+//! seven sequences is 1.59 before the main loop (7.30 without the search).
 //! Runs before the main loop (allocations outside the hot path).
 
 use glam::{DMat3, DQuat, DVec3, Vec3};
@@ -67,6 +70,9 @@ pub struct PoseSearchOpts {
     /// Later Gaussians are matched only to frame points not explained by the
     /// Gaussians posed before them.
     pub exclusive: bool,
+    /// After the main loop, touching Gaussians take each other's motion when it
+    /// fits within this factor in every frame (`snap_rigid`; 0 = off).
+    pub snap_ratio: f64,
 }
 
 impl Default for PoseSearchOpts {
@@ -84,6 +90,7 @@ impl Default for PoseSearchOpts {
             rigid_ratio: 1.5,
             keep_ratio: 1.25,
             exclusive: true,
+            snap_ratio: 3.0,
         }
     }
 }
@@ -202,13 +209,13 @@ fn icp(tg: &Target, pts: &[DVec3], mut mo: Motion, rounds: usize, keep: f64) -> 
 /// `b[i][j]` is the mean midpoint of those pairs (the contact point).
 /// Gaussians without contact still get a pivot: `b[i][j]` is then the midpoint of
 /// the closest pair and `d2[i][j]` its squared distance (for the visiting order).
-struct Contacts {
-    w: Vec<Vec<usize>>,
-    b: Vec<Vec<DVec3>>,
-    d2: Vec<Vec<f64>>,
+pub(crate) struct Contacts {
+    pub(crate) w: Vec<Vec<usize>>,
+    pub(crate) b: Vec<Vec<DVec3>>,
+    pub(crate) d2: Vec<Vec<f64>>,
 }
 
-fn contacts(groups: &[Vec<DVec3>]) -> Contacts {
+pub(crate) fn contacts(groups: &[Vec<DVec3>]) -> Contacts {
     let m = groups.len();
     let all: Vec<(usize, DVec3)> = groups
         .iter()
@@ -283,7 +290,7 @@ fn contacts(groups: &[Vec<DVec3>]) -> Contacts {
 }
 
 /// Relative motion frame 0 → t of Gaussian i under the current parameters.
-fn current(g0: &Gauss, gt: &Gauss) -> Motion {
+pub(crate) fn current(g0: &Gauss, gt: &Gauss) -> Motion {
     let r = gt.r * g0.r.transpose();
     (r, gt.mu - r * g0.mu)
 }
@@ -671,6 +678,95 @@ fn select_by_coverage(
     sel
 }
 
+/// Makes touching Gaussians that move as one rigid body move identically: Gaussian
+/// j takes neighbour i's motion when that motion explains j's frame-0 points in
+/// every frame t ≥ 1 within `ratio` of j's own fit (trimmed one-sided Chamfer, as in
+/// the search). Greedy, best-explained pair first, until nothing changes. Their
+/// L_merge is then exactly 0, so the merge of Step 2 joins them; without this,
+/// independent pose noise keeps over-segmented pieces of one part apart.
+/// Returns the number of snaps.
+#[allow(clippy::needless_range_loop)] // t indexes frames in several arrays
+pub fn snap_rigid(data: &Data, params: &mut Params, points: usize, ratio: f64, keep: f64) -> usize {
+    let kk = data.k();
+    let m = params.layout.m;
+    if kk < 2 || m < 2 || data.frames[0].is_empty() {
+        return 0;
+    }
+    let mut gs: Vec<Vec<Gauss>> = vec![Vec::new(); kk];
+    for (t, g) in gs.iter_mut().enumerate() {
+        params.frame_into(t, g);
+    }
+    let g0 = gs[0].clone();
+    let f0 = &data.frames[0];
+    let step = (f0.len() / points.max(1)).max(1);
+    let mut groups: Vec<Vec<DVec3>> = vec![Vec::new(); m];
+    for p in f0.iter().step_by(step) {
+        groups[argmin_maha(&g0, *p).0].push(*p);
+    }
+    let con = contacts(&groups);
+    let mut rel: Vec<Vec<Motion>> = (0..m)
+        .map(|i| (0..kk).map(|t| current(&g0[i], &gs[t][i])).collect())
+        .collect();
+    let targets: Vec<Target> = (0..kk).map(|t| Target::frame(data, t)).collect();
+    let mut buf = Vec::new();
+    // Own fit per Gaussian and frame (unchanged by snapping others).
+    let own: Vec<Vec<f64>> = (0..m)
+        .map(|j| {
+            (0..kk)
+                .map(|t| score(&targets[t], &groups[j], rel[j][t], keep, &mut buf))
+                .collect()
+        })
+        .collect();
+    // Clusters of Gaussians sharing one motion (that of the cluster's first member).
+    let mut cluster: Vec<usize> = (0..m).collect();
+    let mut snapped = 0;
+    loop {
+        // The touching pair of clusters (A moving with B) whose worst member-frame
+        // ratio is lowest.
+        let mut best: Option<(f64, usize, usize)> = None;
+        for ca in 0..m {
+            let members: Vec<usize> = (0..m).filter(|&j| cluster[j] == ca).collect();
+            if members.is_empty() {
+                continue;
+            }
+            for cb in (0..m).filter(|&c| c != ca) {
+                let touching = members
+                    .iter()
+                    .any(|&j| (0..m).any(|i| cluster[i] == cb && con.w[i][j] > 0));
+                if !touching {
+                    continue;
+                }
+                let mut worst: f64 = 0.0;
+                'check: for &j in members.iter().filter(|&&j| groups[j].len() >= 3) {
+                    for t in 1..kk {
+                        let s = score(&targets[t], &groups[j], rel[cb][t], keep, &mut buf);
+                        // Floor: a perfect own fit must not make every ratio infinite.
+                        worst = worst.max(s / own[j][t].max(1e-7));
+                        if worst > ratio {
+                            break 'check;
+                        }
+                    }
+                }
+                if worst <= ratio && best.is_none_or(|b| worst < b.0) {
+                    best = Some((worst, ca, cb));
+                }
+            }
+        }
+        let Some((_, ca, cb)) = best else { break };
+        for j in 0..m {
+            if cluster[j] == ca {
+                cluster[j] = cb;
+                for t in 1..kk {
+                    rel[j][t] = rel[cb][t];
+                    set_relative_pose(params, t, j, &g0[j], rel[cb][t]);
+                }
+            }
+        }
+        snapped += 1;
+    }
+    snapped
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
@@ -792,6 +888,60 @@ pub(crate) mod tests {
                 })
                 .fold(f64::INFINITY, f64::min);
             assert!(best.to_degrees() < 45.0, "{}", best.to_degrees());
+        }
+    }
+    #[test]
+    #[allow(clippy::needless_range_loop)]
+    fn snap_joins_pieces_of_one_part_but_not_a_joint() {
+        // Base split into two Gaussians with slightly different (noisy) motions, and
+        // the arm on its hinge: the base pieces must end with one motion, the arm
+        // must keep its own.
+        let angles = [0.0, 0.9, -1.2, 1.6];
+        let frames: Vec<(Vec<Vec3>, Vec<u32>)> = angles
+            .iter()
+            .enumerate()
+            .map(|(k, a)| hinge(*a, 3000, 80 + k as u64))
+            .collect();
+        let data = Data::new(frames.iter().map(|f| f.0.clone()).collect());
+        let (f0, lab) = (&frames[0].0, &frames[0].1);
+        let split: Vec<u32> = f0
+            .iter()
+            .zip(lab)
+            .map(|(p, &l)| if l == 1 { 2 } else { (p.x > -0.25) as u32 })
+            .collect();
+        let mut params = oracle_params(f0, &split, 3, angles.len());
+        let g0: Vec<Gauss> = (0..3).map(|i| params.gauss(0, i)).collect();
+        for (t, a) in angles.iter().enumerate().skip(1) {
+            let noise =
+                DMat3::from_axis_angle(DVec3::new(0.2, 1.0, 0.3).normalize(), 0.01 * t as f64);
+            set_relative_pose(&mut params, t, 0, &g0[0], (noise, DVec3::ZERO));
+            set_relative_pose(
+                &mut params,
+                t,
+                1,
+                &g0[1],
+                (DMat3::IDENTITY, DVec3::new(0.0, 0.002, 0.0)),
+            );
+            set_relative_pose(
+                &mut params,
+                t,
+                2,
+                &g0[2],
+                (DMat3::from_axis_angle(DVec3::Z, *a), DVec3::ZERO),
+            );
+        }
+        let n = snap_rigid(&data, &mut params, 1024, 3.0, 0.8);
+        assert_eq!(n, 1, "one snap (the two base pieces)");
+        let rel = |i: usize, t: usize| current(&params.gauss(0, i), &params.gauss(t, i));
+        for t in 1..angles.len() {
+            let (a, b) = (rel(0, t), rel(1, t));
+            assert!(
+                angle(a.0, b.0) < 1e-9 && a.1.distance(b.1) < 1e-9,
+                "frame {t}"
+            );
+            let arm = rel(2, t);
+            let want = DMat3::from_axis_angle(DVec3::Z, angles[t]);
+            assert!(angle(arm.0, want) < 1e-9, "frame {t}: the arm moved");
         }
     }
 }

@@ -147,6 +147,13 @@ pub fn prepare(seq: &Sequence, opts: &FitOptions) -> Result<Prepared> {
     })
 }
 
+/// The global pose search (`fit::pose_search`) runs only when every working frame
+/// has at least this many points: on sparse frames its groups are too small to be
+/// told apart. Measured (Fast, end to end): procedural laptop 4 × 512 mean RI 0.505 /
+/// reconstruction 9.56 with the search vs 0.725 / 1.42 without; 10 × 2048: 0.97 /
+/// 1.43 with vs 0.84 / 1.70 without.
+pub const SEARCH_MIN_POINTS: usize = 1024;
+
 /// Runs one candidate m on prepared data.
 pub fn run_candidate(
     prep: &Prepared,
@@ -154,7 +161,12 @@ pub fn run_candidate(
     opts: &FitOptions,
     cb: &mut dyn FnMut(&Progress) -> Control,
 ) -> Result<Step1Result> {
-    let cfg = FitConfig::new(prep.sched.clone(), prep.occluded, opts.seed);
+    let mut cfg = FitConfig::new(prep.sched.clone(), prep.occluded, opts.seed);
+    let fewest = prep.data.frames.iter().map(Vec::len).min().unwrap_or(0);
+    if fewest < SEARCH_MIN_POINTS {
+        cfg.pose_search = None;
+        cfg.motion_seg = None;
+    }
     #[cfg(not(target_arch = "wasm32"))]
     let t0 = std::time::Instant::now();
     let (params, stats) = fitter::fit_candidate(&prep.data, m, &cfg, prep.flow.as_ref(), cb)?;
