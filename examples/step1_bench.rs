@@ -144,6 +144,11 @@ fn main() {
                     o.snap_ratio = val().parse().expect("ps-snap")
                 }
             }
+            "--ps-occl" => {
+                if let Some(o) = search.as_mut() {
+                    o.occluded = true
+                }
+            }
             "--ps-no-excl" => {
                 if let Some(o) = search.as_mut() {
                     o.exclusive = false

@@ -635,7 +635,11 @@ pub fn fit_candidate(
     if let (Some(o), false) = (&cfg.pose_init, cfg.occlusion) {
         pose_init::init_poses(data, &mut params, o, cfg.seed ^ m as u64);
     }
-    if let (Some(o), false) = (&cfg.pose_search, cfg.occlusion) {
+    let search = cfg
+        .pose_search
+        .as_ref()
+        .filter(|o| !cfg.occlusion || o.occluded);
+    if let Some(o) = search {
         let rounds = cfg.motion_seg.as_ref().map_or(0, |ms| ms.rounds);
         let total = (rounds + 1) * m;
         for round in 0..=rounds {
@@ -663,10 +667,7 @@ pub fn fit_candidate(
         }
     }
     adam.reset();
-    let main_lr = match (&cfg.pose_search, cfg.occlusion) {
-        (Some(o), false) => o.main_lr,
-        _ => sched.lr,
-    };
+    let main_lr = search.map_or(sched.lr, |o| o.main_lr);
     adam.lr = main_lr;
     let mut emd_cache: Vec<Option<EmdPair>> = vec![None; if cfg.occlusion { kk } else { kk * kk }];
     let mut plan = PlanB {
@@ -791,7 +792,7 @@ pub fn fit_candidate(
         }
     }
     stats.last = named(lm, ls, &lb);
-    if let (Some(o), false) = (&cfg.pose_search, cfg.occlusion) {
+    if let Some(o) = search {
         if o.snap_ratio > 0.0 {
             pose_search::snap_rigid(data, &mut params, o.points, o.snap_ratio, o.keep);
         }
