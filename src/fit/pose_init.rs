@@ -104,6 +104,18 @@ pub fn kabsch_trimmed(a: &[DVec3], b: &[DVec3], keep: f64) -> Option<(DMat3, DVe
     Some(fit)
 }
 
+/// About `points` of frame 0's points (an even subsample), grouped by the Gaussian
+/// of `g0` with the smallest Mahalanobis distance.
+pub fn frame0_groups(data: &Data, g0: &[Gauss], points: usize) -> Vec<Vec<DVec3>> {
+    let f0 = &data.frames[0];
+    let step = (f0.len() / points.max(1)).max(1);
+    let mut groups: Vec<Vec<DVec3>> = vec![Vec::new(); g0.len()];
+    for p in f0.iter().step_by(step) {
+        groups[argmin_maha(g0, *p).0].push(*p);
+    }
+    groups
+}
+
 /// Sets Gaussian `i`'s pose in frame `t` to its frame-0 pose `g0` moved by the
 /// rigid motion x ↦ r x + c.
 pub fn set_relative_pose(
@@ -138,13 +150,8 @@ pub fn init_poses(data: &Data, params: &mut Params, opts: &PoseInitOpts, seed: u
     }
     let mut g0: Vec<Gauss> = Vec::new();
     params.frame_into(0, &mut g0);
-    let f0 = &data.frames[0];
-    let step = (f0.len() / opts.points.max(1)).max(1);
     // Frame-0 points grouped by Gaussian.
-    let mut groups: Vec<Vec<DVec3>> = vec![Vec::new(); m];
-    for p in f0.iter().step_by(step) {
-        groups[argmin_maha(&g0, *p).0].push(*p);
-    }
+    let groups = frame0_groups(data, &g0, opts.points);
     // Relative poses frame 0 → current frame, per Gaussian.
     let mut rel: Vec<(DMat3, DVec3)> = vec![(DMat3::IDENTITY, DVec3::ZERO); m];
     let est = OtFlow { n: opts.flow_n };
@@ -212,12 +219,7 @@ pub fn refine_poses(data: &Data, params: &mut Params, opts: &PoseInitOpts) {
     let mut g0: Vec<Gauss> = Vec::new();
     let mut gt: Vec<Gauss> = Vec::new();
     params.frame_into(0, &mut g0);
-    let f0 = &data.frames[0];
-    let step = (f0.len() / opts.points.max(1)).max(1);
-    let mut groups: Vec<Vec<DVec3>> = vec![Vec::new(); m];
-    for p in f0.iter().step_by(step) {
-        groups[argmin_maha(&g0, *p).0].push(*p);
-    }
+    let groups = frame0_groups(data, &g0, opts.points);
     let mut dst = Vec::new();
     let mut res = Vec::new();
     let score = |r: DMat3, c: DVec3, t: usize, src: &[DVec3], res: &mut Vec<f64>| -> f64 {

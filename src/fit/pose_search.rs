@@ -32,8 +32,8 @@ use crate::geom::knn::Grid;
 use crate::Result;
 
 use super::fitter::Data;
-use super::gaussians::{argmin_maha, Gauss, Params};
-use super::pose_init::{kabsch_trimmed, set_relative_pose};
+use super::gaussians::{Gauss, Params};
+use super::pose_init::{frame0_groups, kabsch_trimmed, set_relative_pose};
 
 /// Options of the pose search.
 #[derive(Debug, Clone, Copy)]
@@ -318,12 +318,7 @@ pub fn search_poses(
     }
     let mut g0: Vec<Gauss> = Vec::new();
     params.frame_into(0, &mut g0);
-    let f0 = &data.frames[0];
-    let step = (f0.len() / opts.points.max(1)).max(1);
-    let mut groups: Vec<Vec<DVec3>> = vec![Vec::new(); m];
-    for p in f0.iter().step_by(step) {
-        groups[argmin_maha(&g0, *p).0].push(*p);
-    }
+    let groups = frame0_groups(data, &g0, opts.points);
     let probes: Vec<Vec<DVec3>> = groups
         .iter()
         .map(|g| {
@@ -703,12 +698,7 @@ pub fn snap_rigid(data: &Data, params: &mut Params, points: usize, ratio: f64, k
         params.frame_into(t, g);
     }
     let g0 = gs[0].clone();
-    let f0 = &data.frames[0];
-    let step = (f0.len() / points.max(1)).max(1);
-    let mut groups: Vec<Vec<DVec3>> = vec![Vec::new(); m];
-    for p in f0.iter().step_by(step) {
-        groups[argmin_maha(&g0, *p).0].push(*p);
-    }
+    let groups = frame0_groups(data, &g0, points);
     let con = contacts(&groups);
     let mut rel: Vec<Vec<Motion>> = (0..m)
         .map(|i| (0..kk).map(|t| current(&g0[i], &gs[t][i])).collect())
