@@ -13,7 +13,7 @@ use nalgebra::{Matrix3, Vector3};
 
 use super::fitter::Data;
 use super::gaussians::{Gauss, Params};
-use super::pose_init::set_relative_pose;
+use super::pose_init::{relative_motion, set_relative_pose};
 
 /// Options of the re-segmentation.
 #[derive(Debug, Clone, Copy)]
@@ -62,10 +62,7 @@ pub fn resegment(data: &Data, params: &mut Params, opts: &MotionSegOpts) -> usiz
     let rel: Vec<Vec<(DMat3, DVec3)>> = (0..m)
         .map(|i| {
             (0..kk)
-                .map(|t| {
-                    let r = gs[t][i].r * g0[i].r.transpose();
-                    (r, gs[t][i].mu - r * g0[i].mu)
-                })
+                .map(|t| relative_motion(&g0[i], &gs[t][i]))
                 .collect()
         })
         .collect();

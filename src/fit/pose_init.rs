@@ -116,6 +116,12 @@ pub fn frame0_groups(data: &Data, g0: &[Gauss], points: usize) -> Vec<Vec<DVec3>
     groups
 }
 
+/// The rigid motion x ↦ r x + c carrying Gaussian `g0` (frame 0) onto `gt` (frame t).
+pub fn relative_motion(g0: &Gauss, gt: &Gauss) -> (DMat3, DVec3) {
+    let r = gt.r * g0.r.transpose();
+    (r, gt.mu - r * g0.mu)
+}
+
 /// Sets Gaussian `i`'s pose in frame `t` to its frame-0 pose `g0` moved by the
 /// rigid motion x ↦ r x + c.
 pub fn set_relative_pose(
@@ -243,8 +249,7 @@ pub fn refine_poses(data: &Data, params: &mut Params, opts: &PoseInitOpts) {
                 continue;
             }
             // Relative pose frame 0 → t of Gaussian i: T_i^t (T_i^0)⁻¹.
-            let r0 = gt[i].r * g0[i].r.transpose();
-            let c0 = gt[i].mu - r0 * g0[i].mu;
+            let (r0, c0) = relative_motion(&g0[i], &gt[i]);
             let base = score(r0, c0, t, &groups[i], &mut res);
             let (mut r, mut c) = (r0, c0);
             for _ in 0..opts.icp {

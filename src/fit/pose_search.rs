@@ -33,7 +33,7 @@ use crate::Result;
 
 use super::fitter::Data;
 use super::gaussians::{Gauss, Params};
-use super::pose_init::{frame0_groups, kabsch_trimmed, set_relative_pose};
+use super::pose_init::{frame0_groups, kabsch_trimmed, relative_motion, set_relative_pose};
 
 /// Options of the pose search.
 #[derive(Debug, Clone, Copy)]
@@ -295,12 +295,6 @@ pub(crate) fn contacts(groups: &[Vec<DVec3>]) -> Contacts {
     Contacts { w, b, d2 }
 }
 
-/// Relative motion frame 0 → t of Gaussian i under the current parameters.
-pub(crate) fn current(g0: &Gauss, gt: &Gauss) -> Motion {
-    let r = gt.r * g0.r.transpose();
-    (r, gt.mu - r * g0.mu)
-}
-
 /// Searches every Gaussian's pose in frames t ≥ 1 (see the module doc) and writes
 /// the chosen ones into `params`; frame 0 is left unchanged. `tick(done)` is called
 /// after each Gaussian; an error from it (a cancel) stops the search.
@@ -335,7 +329,11 @@ pub fn search_poses(
     }
     // Relative motions frame 0 → t, per Gaussian, as they are decided.
     let mut rel: Vec<Vec<Motion>> = (0..m)
-        .map(|i| (0..kk).map(|t| current(&g0[i], &gts[t][i])).collect())
+        .map(|i| {
+            (0..kk)
+                .map(|t| relative_motion(&g0[i], &gts[t][i]))
+                .collect()
+        })
         .collect();
     let mut targets: Vec<Target> = (0..kk).map(|t| Target::frame(data, t)).collect();
     // Root: among Gaussians with at least half the median point count, the one
@@ -377,7 +375,6 @@ pub fn search_poses(
                 t,
                 &groups[root],
                 rel[root][t],
-                opts,
                 &mut buf,
             );
         }
@@ -462,15 +459,7 @@ pub fn search_poses(
             rel[j][t] = found[0];
             pool[j][t] = found;
             if opts.exclusive {
-                claim(
-                    &mut targets[t],
-                    data,
-                    t,
-                    &groups[j],
-                    rel[j][t],
-                    opts,
-                    &mut buf,
-                );
+                claim(&mut targets[t], data, t, &groups[j], rel[j][t], &mut buf);
             }
         }
     }
@@ -489,15 +478,7 @@ pub fn search_poses(
 /// taken: within 3× their median residual (clamped to 0.01–0.05), so later
 /// Gaussians cannot also land on them (a small flat piece otherwise fits anywhere
 /// on another part's surface).
-fn claim(
-    tg: &mut Target,
-    data: &Data,
-    t: usize,
-    pts: &[DVec3],
-    mo: Motion,
-    _opts: &PoseSearchOpts,
-    buf: &mut Vec<f64>,
-) {
+fn claim(tg: &mut Target, data: &Data, t: usize, pts: &[DVec3], mo: Motion, buf: &mut Vec<f64>) {
     let moved: Vec<DVec3> = pts.iter().map(|p| mo.0 * *p + mo.1).collect();
     buf.clear();
     buf.extend(
@@ -701,7 +682,11 @@ pub fn snap_rigid(data: &Data, params: &mut Params, points: usize, ratio: f64, k
     let groups = frame0_groups(data, &g0, points);
     let con = contacts(&groups);
     let mut rel: Vec<Vec<Motion>> = (0..m)
-        .map(|i| (0..kk).map(|t| current(&g0[i], &gs[t][i])).collect())
+        .map(|i| {
+            (0..kk)
+                .map(|t| relative_motion(&g0[i], &gs[t][i]))
+                .collect()
+        })
         .collect();
     let targets: Vec<Target> = (0..kk).map(|t| Target::frame(data, t)).collect();
     let mut buf = Vec::new();
@@ -928,7 +913,7 @@ pub(crate) mod tests {
         }
         let n = snap_rigid(&data, &mut params, 1024, 3.0, 0.8);
         assert_eq!(n, 1, "one snap (the two base pieces)");
-        let rel = |i: usize, t: usize| current(&params.gauss(0, i), &params.gauss(t, i));
+        let rel = |i: usize, t: usize| relative_motion(&params.gauss(0, i), &params.gauss(t, i));
         for t in 1..angles.len() {
             let (a, b) = (rel(0, t), rel(1, t));
             assert!(
