@@ -1,6 +1,8 @@
 //! Metrics of SPEC §5 (Reart-compatible): Rand index, reconstruction and flow
-//! error, tree edit distance, re-animation error; [`evaluate`] computes them all.
+//! error, tree edit distance, re-animation error, plus joint accuracy (type, axis,
+//! pivot; issue #4); [`evaluate`] computes them all.
 
+pub mod joint_error;
 pub mod motion_error;
 pub mod rand_index;
 pub mod reanimation;
@@ -29,6 +31,9 @@ pub struct Metrics {
     pub tree_edit_distance: Option<usize>,
     /// `None` when the result has no joints or the ground truth no held-out poses.
     pub reanimation_error: Option<f64>,
+    /// Joint type, axis and pivot accuracy; `None` when the result has no joints.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joints: Option<joint_error::JointErrors>,
     /// Why an optional metric is absent.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub notes: Vec<String>,
@@ -116,6 +121,16 @@ pub fn evaluate(
             None
         }
     };
+    let joints = match &result.joints {
+        Some(_) => Some(joint_error::joint_errors(
+            result,
+            gt,
+            canonical_points,
+            pred_c,
+            canonical_labels,
+        )?),
+        None => None,
+    };
     Ok(Metrics {
         mean_ri,
         canonical_ri,
@@ -123,6 +138,7 @@ pub fn evaluate(
         flow_error: motion.flow,
         tree_edit_distance,
         reanimation_error,
+        joints,
         notes,
     })
 }
