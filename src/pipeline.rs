@@ -277,6 +277,7 @@ pub fn finish(
         "step1_seconds": step1.timings.total_s,
         "candidates_timing": step1.timings.per_candidate,
         "kinematics_seconds": kin.timings,
+        "refine": kin.refine,
         "notes": notes,
     }));
     result.validate("result")?;

@@ -10,6 +10,7 @@ use serde::Serialize;
 use super::merge::{merge_parts, MergeEvent, MergeOptions};
 use super::project::{motions_from_canonical, project_joints, JointResidual};
 use super::refine::{refine, RefineOptions, RefineReport};
+use super::screw::PartExtent;
 use super::spatial::pair_distances;
 use super::tree::{least_motion_root, pair_costs, part_motion, spanning_tree};
 use crate::geom::se3::rigid_inverse;
@@ -109,29 +110,41 @@ fn check_inputs(
     Ok(parts)
 }
 
-/// Centroid of each part at the canonical frame, pooling every frame's points moved
-/// back to frame c by the part's motion (robust to parts missing in frame c).
-pub fn part_centres(
+/// Centroid and RMS radius of each part at the canonical frame, pooling every frame's
+/// points moved back to frame c by the part's motion (robust to parts missing in frame c).
+pub fn part_extents(
     points: &[Vec<Vec3>],
     labels: &[Vec<u32>],
     poses: &[Vec<DMat4>],
     canonical: usize,
-) -> Vec<DVec3> {
+) -> Vec<PartExtent> {
     let parts = poses[0].len();
     let motions = motions_from_canonical(poses, canonical);
     let mut sum = vec![DVec3::ZERO; parts];
+    let mut sq = vec![0.0f64; parts];
     let mut cnt = vec![0usize; parts];
     for (t, (ps, ls)) in points.iter().zip(labels).enumerate() {
         let back: Vec<DMat4> = motions[t].iter().map(rigid_inverse).collect();
         for (x, &l) in ps.iter().zip(ls) {
             let l = l as usize;
-            sum[l] += back[l].transform_point3(x.as_dvec3());
+            let y = back[l].transform_point3(x.as_dvec3());
+            sum[l] += y;
+            sq[l] += y.length_squared();
             cnt[l] += 1;
         }
     }
-    sum.iter()
-        .zip(&cnt)
-        .map(|(s, &c)| if c > 0 { *s / c as f64 } else { DVec3::ZERO })
+    (0..parts)
+        .map(|p| {
+            if cnt[p] == 0 {
+                return PartExtent::default();
+            }
+            let centre = sum[p] / cnt[p] as f64;
+            let var = sq[p] / cnt[p] as f64 - centre.length_squared();
+            PartExtent {
+                centre,
+                radius: var.max(0.0).sqrt(),
+            }
+        })
         .collect()
 }
 
@@ -192,8 +205,8 @@ pub fn build_articulated(
     // Tree.
     let parts = merged.parts;
     let dist = pair_distances(points, &new_labels, parts, canonical);
-    let centres = part_centres(points, &new_labels, &merged.poses, canonical);
-    let costs = pair_costs(&merged.poses, &dist, canonical, &centres);
+    let extents = part_extents(points, &new_labels, &merged.poses, canonical);
+    let costs = pair_costs(&merged.poses, &dist, canonical, &extents);
     let root = least_motion_root(&merged.poses, parts);
     let parent = spanning_tree(&costs, root);
     let t2 = clock();
@@ -205,7 +218,7 @@ pub fn build_articulated(
         &merged.poses,
         &parent,
         canonical,
-        &centres,
+        &extents,
         new_labels,
         opts.limit_pad,
     )?;

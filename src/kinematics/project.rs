@@ -7,11 +7,11 @@
 //! output poses are exactly the forward kinematics of the output joints
 //! (root_motion · Π exp([Sⱼ] qⱼ)).
 
-use glam::{DMat4, DVec3};
+use glam::DMat4;
 use serde::Serialize;
 
 use super::chain::screw_exp;
-use super::screw::{fit_screw, one_dof_loss};
+use super::screw::{fit_screw, one_dof_loss, PartExtent};
 use crate::geom::se3::{rigid_inverse, to_row_major};
 use crate::io::gt::JointType;
 use crate::io::result::{FitResult, ResultJoint, ResultTree, FORMAT, VERSION};
@@ -51,7 +51,8 @@ pub fn bfs_order(parent: &[i64]) -> Vec<usize> {
 }
 
 /// Project `poses[k][p]` (world poses of the merged parts) onto the tree `parent`
-/// (exactly one root, −1). `centres[p]`: centroid of part p at frame c (places pivots).
+/// (exactly one root, −1). `extents[p]`: centroid and radius of part p at frame c (places pivots,
+/// scales the type test).
 /// `limit_pad`: joint limits are [min, max] of the states widened by this fraction of
 /// their range on each side. Returns the complete result (labels as given) and the
 /// per-joint residuals.
@@ -59,7 +60,7 @@ pub fn project_joints(
     poses: &[Vec<DMat4>],
     parent: &[i64],
     canonical: usize,
-    centres: &[DVec3],
+    extents: &[PartExtent],
     labels: Vec<Vec<u32>>,
     limit_pad: f64,
 ) -> crate::Result<(FitResult, Vec<JointResidual>)> {
@@ -85,7 +86,7 @@ pub fn project_joints(
         let rel: Vec<DMat4> = (0..k)
             .map(|t| rigid_inverse(&fk[t][a]) * observed[t][b])
             .collect();
-        let mut fit = fit_screw(&rel, centres[b]);
+        let mut fit = fit_screw(&rel, extents[b]);
         fit.states[canonical] = 0.0;
         let loss = one_dof_loss(&rel, fit.joint_type, fit.axis, fit.pivot, &fit.states);
         for (f, &s) in fk.iter_mut().zip(&fit.states) {
@@ -142,6 +143,7 @@ pub fn project_joints(
 mod tests {
     use super::*;
     use crate::geom::se3::from_row_major;
+    use glam::DVec3;
 
     #[test]
     fn projection_reproduces_an_exact_chain() {
@@ -165,7 +167,7 @@ mod tests {
             &poses,
             &[-1, 0, 1],
             0,
-            &[DVec3::ZERO; 3],
+            &[PartExtent::default(); 3],
             vec![vec![]; k],
             0.0,
         )

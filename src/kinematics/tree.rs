@@ -5,12 +5,12 @@
 //! The MST uses `petgraph::algo::min_spanning_tree` (Kruskal with a union-find) on the
 //! complete graph of the parts: already a dependency, well tested, and P ≤ a few dozen.
 
-use glam::{DMat4, DVec3};
+use glam::DMat4;
 use petgraph::algo::min_spanning_tree;
 use petgraph::data::Element;
 use petgraph::graph::UnGraph;
 
-use super::screw::{dev_from_identity, fit_screw, relative_motions, ScrewFit};
+use super::screw::{dev_from_identity, fit_screw, relative_motions, PartExtent, ScrewFit};
 use super::spatial::PairDistances;
 use crate::geom::se3::rigid_inverse;
 
@@ -36,13 +36,13 @@ impl PairCosts {
     }
 }
 
-/// Pairwise L_spatial and L_1DOF. `centres[p]`: a reference point of part p at frame c
-/// (the centroid of its points), used to place revolute pivots.
+/// Pairwise L_spatial and L_1DOF. `extents[p]`: centroid and radius of part p at frame c,
+/// used to place revolute pivots and to decide the joint type.
 pub fn pair_costs(
     poses: &[Vec<DMat4>],
     dist: &PairDistances,
     canonical: usize,
-    centres: &[DVec3],
+    extents: &[PartExtent],
 ) -> PairCosts {
     let n = dist.parts;
     let mut one_dof = vec![0.0; n * n];
@@ -50,9 +50,12 @@ pub fn pair_costs(
     for i in 0..n {
         for j in i + 1..n {
             let rel = relative_motions(poses, i, j, canonical);
-            let f = fit_screw(&rel, centres[j]);
-            one_dof[i * n + j] = f.loss;
-            one_dof[j * n + i] = f.loss;
+            let f = fit_screw(&rel, extents[j]);
+            // The tree uses the paper's L_1DOF (the better of the two types); the type
+            // rule of `fit_screw` only decides what the joint becomes.
+            let l = f.loss_revolute.min(f.loss_prismatic);
+            one_dof[i * n + j] = l;
+            one_dof[j * n + i] = l;
             fits[i * n + j] = Some(f);
         }
     }
@@ -148,6 +151,7 @@ pub fn reroot(parent: &[i64], root: usize) -> Vec<i64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::DVec3;
 
     #[test]
     fn mst_follows_costs_and_root() {
