@@ -139,6 +139,11 @@ fn main() {
                     o.keep_ratio = val().parse().expect("ps-keep")
                 }
             }
+            "--ps-noflip" => {
+                if let Some(o) = search.as_mut() {
+                    o.flip_guard = false
+                }
+            }
             "--ps-snap" => {
                 if let Some(o) = search.as_mut() {
                     o.snap_ratio = val().parse().expect("ps-snap")

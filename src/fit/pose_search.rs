@@ -78,6 +78,13 @@ pub struct PoseSearchOpts {
     /// error 14.9 / 17.1 / 19.3 → 13.8 / 10.6 / 18.4, but flow error 19.6 / 18.5 /
     /// 14.9 → 24.0 / 15.9 / 23.1.
     pub occluded: bool,
+    /// Flip guard: when the chosen pose turned more than 90° from the previous
+    /// frame's, a candidate within `keep_ratio` of the best (or the previous pose,
+    /// polished by ICP) that stays within 45° of it is taken instead, and the
+    /// coverage selection may only pick alternatives within 90° of the choice. Half of a flat lid fits equally well a half turn apart;
+    /// the procedural laptop (seed 0) had both lid Gaussians flipped in 4 of 10
+    /// frames, and Steps 2–3 then built a wrong chain (reconstruction 11).
+    pub flip_guard: bool,
 }
 
 impl Default for PoseSearchOpts {
@@ -97,6 +104,7 @@ impl Default for PoseSearchOpts {
             exclusive: true,
             snap_ratio: 3.0,
             occluded: false,
+            flip_guard: true,
         }
     }
 }
@@ -121,6 +129,17 @@ pub fn uniform_rotations(n: usize) -> Vec<DMat3> {
 
 /// A rigid motion x ↦ r x + c.
 pub type Motion = (DMat3, DVec3);
+
+/// Flip guard thresholds (radians): a jump beyond `FLIP_ANGLE` from the previous
+/// frame's rotation is suspect; candidates within `STAY_ANGLE` of it may replace it.
+const FLIP_ANGLE: f64 = std::f64::consts::FRAC_PI_2;
+const STAY_ANGLE: f64 = std::f64::consts::FRAC_PI_4;
+
+/// Angle (radians) of the rotation between `a` and `b`.
+pub(crate) fn rotation_angle(a: DMat3, b: DMat3) -> f64 {
+    let m = (a.transpose() * b).to_cols_array();
+    ((m[0] + m[4] + m[8] - 1.0) / 2.0).clamp(-1.0, 1.0).acos()
+}
 
 /// The target cloud of one frame for the search: the frame's points not yet
 /// claimed by an already posed Gaussian (all of them without `exclusive`).
@@ -455,6 +474,38 @@ pub fn search_poses(
             let s_cur = score(tg, &groups[j], cands[0], opts.keep, &mut buf);
             if opts.keep_ratio > 0.0 && s_cur <= opts.keep_ratio * s_best {
                 found.insert(0, cands[0]);
+            }
+            if opts.flip_guard {
+                let prev_mo = if t == 1 {
+                    (DMat3::IDENTITY, DVec3::ZERO)
+                } else {
+                    rel[j][t - 1]
+                };
+                let prev = prev_mo.0;
+                if rotation_angle(found[0].0, prev) > FLIP_ANGLE {
+                    // The previous frame's pose carried over and polished is a
+                    // candidate too (the coarse search may not have kept it).
+                    found.push(icp(tg, &groups[j], prev_mo, opts.final_icp, opts.keep));
+                    let lim = opts.keep_ratio.max(1.0) * s_best;
+                    let mut stay: Option<(usize, f64)> = None;
+                    for (k, mo) in found.iter().enumerate() {
+                        let a = rotation_angle(mo.0, prev);
+                        if a < STAY_ANGLE
+                            && stay.is_none_or(|(_, b)| a < b)
+                            && score(tg, &groups[j], *mo, opts.keep, &mut buf) <= lim
+                        {
+                            stay = Some((k, a));
+                        }
+                    }
+                    if let Some((k, _)) = stay {
+                        let mo = found.remove(k);
+                        found.insert(0, mo);
+                    }
+                }
+                // The per-frame coverage selection below must not flip it either:
+                // only alternatives within the flip angle of the choice stay.
+                let chosen = found[0].0;
+                found.retain(|mo| rotation_angle(mo.0, chosen) <= FLIP_ANGLE);
             }
             rel[j][t] = found[0];
             pool[j][t] = found;
@@ -808,8 +859,7 @@ pub(crate) mod tests {
     }
 
     pub(crate) fn angle(a: DMat3, b: DMat3) -> f64 {
-        let m = (a.transpose() * b).to_cols_array();
-        ((m[0] + m[4] + m[8] - 1.0) / 2.0).clamp(-1.0, 1.0).acos()
+        rotation_angle(a, b)
     }
 
     #[test]
