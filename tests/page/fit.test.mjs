@@ -55,6 +55,7 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   assert.ok(await sliders.count() >= 1, 'at least one joint slider');
   assert.equal(await page.locator('#metrics-wrap').isVisible(), true);
   assert.match(await page.locator('#metrics').innerText(), /Rand index/i);
+  assert.match(await page.locator('#metrics').innerText(), /Joint types right/i);
   const st = await canvasStats(page);
   assert.ok(st.lit > 500, 'points coloured by part are drawn');
 

@@ -844,6 +844,13 @@ function renderMetrics() {
   for (const [k, label, hint] of METRIC_LABELS) {
     if (mt[k] !== undefined && mt[k] !== null) { row(label, hint, mt[k]); seen.add(k); }
   }
+  const jt = mt.joints;
+  if (jt && typeof jt === 'object') {
+    row('Joints found', 'true joints joining two recovered parts', `${jt.found} / ${jt.joints}`);
+    row('Joint types right', 'of the found joints', `${jt.type_correct} / ${jt.found}`);
+    if (jt.max_axis_deg != null) row('Largest axis error', 'degrees, found joints', jt.max_axis_deg);
+    if (jt.max_pivot_error != null) row('Largest pivot error', '×100, found revolute joints', jt.max_pivot_error);
+  }
   for (const [k, v] of Object.entries(mt)) {
     if (seen.has(k) || v === null || typeof v === 'object') continue;
     row(k.replace(/_/g, ' '), '', v);
