@@ -255,6 +255,83 @@ pub fn merge_parts(
     }
 }
 
+/// Absorbs each `(child, parent)` pair of merged parts into one part (a joint that does
+/// not move: see `build::still_joints`), renumbering the parts in order. A part's pose
+/// becomes that of its largest input member, as in [`merge_parts`]; `input_poses[k][g]`
+/// are the input parts' poses and `counts[g]` their point counts.
+pub fn absorb(
+    out: &MergeOutcome,
+    pairs: &[(usize, usize)],
+    input_poses: &[Vec<DMat4>],
+    counts: &[usize],
+) -> MergeOutcome {
+    // Union-find over merged parts.
+    let mut up: Vec<usize> = (0..out.parts).collect();
+    fn find(up: &mut [usize], mut a: usize) -> usize {
+        while up[a] != a {
+            up[a] = up[up[a]];
+            a = up[a];
+        }
+        a
+    }
+    let mut log = out.log.clone();
+    for &(c, p) in pairs {
+        let (a, b) = (find(&mut up, c), find(&mut up, p));
+        if a != b {
+            log.push(MergeEvent {
+                kind: "still",
+                from: out.members[a].clone(),
+                into: out.members[b].clone(),
+                loss: 0.0,
+            });
+            up[a] = b;
+        }
+    }
+    let mut new_index = vec![usize::MAX; out.parts];
+    let mut members: Vec<Vec<usize>> = Vec::new();
+    for q in 0..out.parts {
+        let r = find(&mut up, q);
+        if new_index[r] == usize::MAX {
+            new_index[r] = members.len();
+            members.push(Vec::new());
+        }
+        let ni = new_index[r];
+        members[ni].extend(out.members[q].iter().copied());
+    }
+    for m in &mut members {
+        m.sort_unstable();
+    }
+    let mut map = vec![0u32; out.map.len()];
+    for (ni, m) in members.iter().enumerate() {
+        for &g in m {
+            map[g] = ni as u32;
+        }
+    }
+    let largest: Vec<usize> = members
+        .iter()
+        .map(|m| {
+            let mut best = m[0];
+            for &g in m {
+                if counts[g] > counts[best] {
+                    best = g;
+                }
+            }
+            best
+        })
+        .collect();
+    let poses = input_poses
+        .iter()
+        .map(|f| largest.iter().map(|&g| f[g]).collect())
+        .collect();
+    MergeOutcome {
+        map,
+        parts: members.len(),
+        members,
+        poses,
+        log,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -301,5 +378,35 @@ mod tests {
         d.min_sq = vec![0.0, 1.0, 1.0, 0.0];
         let out = merge_parts(&poses, &[100, 100], &d, &MergeOptions::default());
         assert_eq!(out.parts, 2);
+    }
+
+    #[test]
+    fn absorb_joins_pairs_and_keeps_the_largest_members_pose() {
+        // four merged parts over six input parts; absorb 3 into 1 and 1 into 0.
+        let k = 3;
+        let poses: Vec<Vec<DMat4>> = (0..k)
+            .map(|t| {
+                (0..6)
+                    .map(|g| DMat4::from_translation(DVec3::new(g as f64, t as f64, 0.0)))
+                    .collect()
+            })
+            .collect();
+        let counts = [10, 50, 5, 20, 7, 30];
+        let out = MergeOutcome {
+            map: vec![0, 1, 2, 3, 0, 1],
+            parts: 4,
+            members: vec![vec![0, 4], vec![1, 5], vec![2], vec![3]],
+            poses: vec![vec![DMat4::IDENTITY; 4]; k],
+            log: Vec::new(),
+        };
+        let a = absorb(&out, &[(3, 1), (1, 0)], &poses, &counts);
+        assert_eq!(a.parts, 2);
+        assert_eq!(a.map, vec![0, 0, 1, 0, 0, 0]);
+        assert_eq!(a.members, vec![vec![0, 1, 3, 4, 5], vec![2]]);
+        // part 0's largest member is input part 1 (50 points)
+        assert_eq!(a.poses[2][0], poses[2][1]);
+        assert_eq!(a.poses[1][1], poses[1][2]);
+        assert_eq!(a.log.len(), 2);
+        assert!(a.log.iter().all(|e| e.kind == "still"));
     }
 }
