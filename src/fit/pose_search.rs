@@ -81,9 +81,10 @@ pub struct PoseSearchOpts {
     /// Flip guard: when the chosen pose turned more than 90° from the previous
     /// frame's, a candidate within `keep_ratio` of the best (or the previous pose,
     /// polished by ICP) that stays within 45° of it is taken instead, and the
-    /// coverage selection may only pick alternatives within 90° of the choice. Half of a flat lid fits equally well a half turn apart;
-    /// the procedural laptop (seed 0) had both lid Gaussians flipped in 4 of 10
-    /// frames, and Steps 2–3 then built a wrong chain (reconstruction 11).
+    /// coverage selection may only pick alternatives within 90° of the choice. Half
+    /// of a flat lid fits equally well a half turn apart; the procedural laptop
+    /// (seed 0) had both lid Gaussians flipped in 4 of 10 frames, and Steps 2–3
+    /// then built a wrong chain (reconstruction 11).
     pub flip_guard: bool,
 }
 
@@ -476,36 +477,12 @@ pub fn search_poses(
                 found.insert(0, cands[0]);
             }
             if opts.flip_guard {
-                let prev_mo = if t == 1 {
+                let prev = if t == 1 {
                     (DMat3::IDENTITY, DVec3::ZERO)
                 } else {
                     rel[j][t - 1]
                 };
-                let prev = prev_mo.0;
-                if rotation_angle(found[0].0, prev) > FLIP_ANGLE {
-                    // The previous frame's pose carried over and polished is a
-                    // candidate too (the coarse search may not have kept it).
-                    found.push(icp(tg, &groups[j], prev_mo, opts.final_icp, opts.keep));
-                    let lim = opts.keep_ratio.max(1.0) * s_best;
-                    let mut stay: Option<(usize, f64)> = None;
-                    for (k, mo) in found.iter().enumerate() {
-                        let a = rotation_angle(mo.0, prev);
-                        if a < STAY_ANGLE
-                            && stay.is_none_or(|(_, b)| a < b)
-                            && score(tg, &groups[j], *mo, opts.keep, &mut buf) <= lim
-                        {
-                            stay = Some((k, a));
-                        }
-                    }
-                    if let Some((k, _)) = stay {
-                        let mo = found.remove(k);
-                        found.insert(0, mo);
-                    }
-                }
-                // The per-frame coverage selection below must not flip it either:
-                // only alternatives within the flip angle of the choice stay.
-                let chosen = found[0].0;
-                found.retain(|mo| rotation_angle(mo.0, chosen) <= FLIP_ANGLE);
+                guard_flip(tg, &groups[j], &mut found, prev, s_best, opts, &mut buf);
             }
             rel[j][t] = found[0];
             pool[j][t] = found;
@@ -523,6 +500,44 @@ pub fn search_poses(
         }
     }
     Ok(())
+}
+
+/// Flip guard (see `PoseSearchOpts::flip_guard`): when `found[0]` turned more than
+/// `FLIP_ANGLE` from the previous frame's motion `prev`, the candidate within
+/// `keep_ratio` of `s_best` closest to `prev` (within `STAY_ANGLE`) goes first, the
+/// previous motion polished by ICP included; then only alternatives within
+/// `FLIP_ANGLE` of the choice stay for the coverage selection.
+fn guard_flip(
+    tg: &Target,
+    pts: &[DVec3],
+    found: &mut Vec<Motion>,
+    prev: Motion,
+    s_best: f64,
+    opts: &PoseSearchOpts,
+    buf: &mut Vec<f64>,
+) {
+    if rotation_angle(found[0].0, prev.0) > FLIP_ANGLE {
+        // The previous frame's pose carried over and polished is a candidate too
+        // (the coarse search may not have kept it).
+        found.push(icp(tg, pts, prev, opts.final_icp, opts.keep));
+        let lim = opts.keep_ratio.max(1.0) * s_best;
+        let mut stay: Option<(usize, f64)> = None;
+        for (k, mo) in found.iter().enumerate() {
+            let a = rotation_angle(mo.0, prev.0);
+            if a < STAY_ANGLE
+                && stay.is_none_or(|(_, b)| a < b)
+                && score(tg, pts, *mo, opts.keep, buf) <= lim
+            {
+                stay = Some((k, a));
+            }
+        }
+        if let Some((k, _)) = stay {
+            let mo = found.remove(k);
+            found.insert(0, mo);
+        }
+    }
+    let chosen = found[0].0;
+    found.retain(|mo| rotation_angle(mo.0, chosen) <= FLIP_ANGLE);
 }
 
 /// Marks the frame points explained by Gaussian points `pts` moved by `mo` as

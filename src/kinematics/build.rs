@@ -10,10 +10,11 @@ use serde::Serialize;
 use super::merge::{absorb, merge_parts, MergeEvent, MergeOptions};
 use super::project::{motions_from_canonical, project_joints, JointResidual};
 use super::refine::{refine, RefineOptions, RefineReport};
-use super::screw::PartExtent;
+use super::screw::{state_range, PartExtent};
 use super::spatial::pair_distances;
 use super::tree::{least_motion_root, pair_costs, part_motion, spanning_tree};
 use crate::geom::se3::rigid_inverse;
+use crate::io::gt::JointType;
 use crate::io::result::FitResult;
 use crate::pipeline::{Control, Progress, Stage};
 
@@ -165,11 +166,10 @@ pub fn still_joints(result: &FitResult) -> Vec<(usize, usize)> {
     joints
         .iter()
         .filter(|j| {
-            let lo = j.state.iter().copied().fold(f64::INFINITY, f64::min);
-            let hi = j.state.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let (lo, hi) = state_range(&j.state);
             let limit = match j.joint_type {
-                crate::io::gt::JointType::Prismatic => STILL_SLIDE,
-                crate::io::gt::JointType::Revolute => STILL_TURN,
+                JointType::Prismatic => STILL_SLIDE,
+                JointType::Revolute => STILL_TURN,
             };
             hi - lo < limit
         })
@@ -309,7 +309,6 @@ pub fn build_articulated(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::gt::JointType;
 
     #[test]
     fn still_joints_are_the_ones_that_do_not_move() {

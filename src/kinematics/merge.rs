@@ -120,16 +120,7 @@ pub fn merge_parts(
     let mut members: Vec<Vec<usize>> = (0..n).map(|p| vec![p]).collect();
     let mut active = vec![true; n];
     let mut log = Vec::new();
-    let rep = |m: &[usize]| -> usize {
-        // largest member; ties to the lowest index
-        let mut best = m[0];
-        for &p in m {
-            if counts[p] > counts[best] {
-                best = p;
-            }
-        }
-        best
-    };
+    let rep = |m: &[usize]| largest_member(m, counts);
     let group_dist = |a: &[usize], b: &[usize]| -> f64 {
         let mut d = f64::INFINITY;
         for &i in a {
@@ -255,6 +246,17 @@ pub fn merge_parts(
     }
 }
 
+/// The member with the most points (ties: the first listed), whose pose a group takes.
+fn largest_member(members: &[usize], counts: &[usize]) -> usize {
+    let mut best = members[0];
+    for &p in members {
+        if counts[p] > counts[best] {
+            best = p;
+        }
+    }
+    best
+}
+
 /// Absorbs each `(child, parent)` pair of merged parts into one part (a joint that does
 /// not move: see `build::still_joints`), renumbering the parts in order. A part's pose
 /// becomes that of its largest input member, as in [`merge_parts`]; `input_poses[k][g]`
@@ -307,18 +309,7 @@ pub fn absorb(
             map[g] = ni as u32;
         }
     }
-    let largest: Vec<usize> = members
-        .iter()
-        .map(|m| {
-            let mut best = m[0];
-            for &g in m {
-                if counts[g] > counts[best] {
-                    best = g;
-                }
-            }
-            best
-        })
-        .collect();
+    let largest: Vec<usize> = members.iter().map(|m| largest_member(m, counts)).collect();
     let poses = input_poses
         .iter()
         .map(|f| largest.iter().map(|&g| f[g]).collect())

@@ -11,7 +11,7 @@ use glam::DMat4;
 use serde::Serialize;
 
 use super::chain::screw_exp;
-use super::screw::{fit_screw, one_dof_loss, PartExtent};
+use super::screw::{fit_screw, one_dof_loss, state_range, PartExtent};
 use crate::geom::se3::{rigid_inverse, to_row_major};
 use crate::io::gt::JointType;
 use crate::io::result::{FitResult, ResultJoint, ResultTree, FORMAT, VERSION};
@@ -92,8 +92,7 @@ pub fn project_joints(
         for (f, &s) in fk.iter_mut().zip(&fit.states) {
             f[b] = f[a] * screw_exp(fit.joint_type, fit.axis, fit.pivot, s);
         }
-        let lo = fit.states.iter().copied().fold(f64::INFINITY, f64::min);
-        let hi = fit.states.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let (lo, hi) = state_range(&fit.states);
         let pad = (hi - lo) * limit_pad;
         residuals.push(JointResidual {
             child: b,

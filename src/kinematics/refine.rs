@@ -43,6 +43,7 @@ use serde::Serialize;
 
 use super::chain::screw_exp;
 use super::project::bfs_order;
+use super::screw::state_range;
 use crate::geom::assignment::Lap;
 use crate::geom::knn::Grid;
 use crate::geom::se3::{from_row_major, to_row_major};
@@ -505,12 +506,16 @@ pub fn refine(
     }
     let mut rng = StdRng::seed_from_u64(opts.seed);
     let train = build_data(result, points, opts.sample, &mut rng);
-    let eval = build_data(result, points, opts.sample, &mut rng);
+    // With frames no larger than the sample both subsamples are the whole clouds:
+    // evaluate on the training data instead of building it again.
+    let whole = points.iter().all(|f| f.len() <= opts.sample);
+    let eval_own = (!whole).then(|| build_data(result, points, opts.sample, &mut rng));
+    let eval = eval_own.as_ref().unwrap_or(&train);
     let mut lap = Lap::default();
     let use_emd = opts.lambda_emd > 0.0 && opts.emd_sample > 0;
     let eval_loss = |x: &[f64], lap: &mut Lap| {
-        let mt = use_emd.then(|| assign(&m, x, &eval, opts.emd_sample, opts.lambda_emd, lap));
-        loss_grad(&m, x, &eval, mt.as_ref(), None)
+        let mt = use_emd.then(|| assign(&m, x, eval, opts.emd_sample, opts.lambda_emd, lap));
+        loss_grad(&m, x, eval, mt.as_ref(), None)
     };
     let loss_before = eval_loss(&x0, &mut lap);
     let mut matching = None;
@@ -582,8 +587,7 @@ fn write_back(result: &mut FitResult, m: &Model, x: &[f64], limit_pad: f64) {
             jt.pivot = piv.to_array();
             jt.state = x[b + 6..b + 6 + k].to_vec();
             jt.state[m.c] = 0.0;
-            let lo = jt.state.iter().copied().fold(f64::INFINITY, f64::min);
-            let hi = jt.state.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let (lo, hi) = state_range(&jt.state);
             let pad = (hi - lo) * limit_pad;
             jt.limits = [lo - pad, hi + pad];
         }

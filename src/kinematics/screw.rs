@@ -82,6 +82,20 @@ pub fn dev_from_identity(m: &DMat4) -> f64 {
     d.to_cols_array().iter().map(|v| v * v).sum()
 }
 
+/// (min, max) of a joint's states.
+pub fn state_range(states: &[f64]) -> (f64, f64) {
+    states
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &s| {
+            (lo.min(s), hi.max(s))
+        })
+}
+
+/// The part of relative motion `q` a joint at state `s` leaves unexplained: Q S(s)⁻¹.
+fn unexplained(q: &DMat4, joint_type: JointType, axis: DVec3, pivot: DVec3, s: f64) -> DMat4 {
+    *q * rigid_inverse(&screw_exp(joint_type, axis, pivot, s))
+}
+
 /// L_1DOF of a given joint for relative motions `rel`.
 pub fn one_dof_loss(
     rel: &[DMat4],
@@ -92,10 +106,7 @@ pub fn one_dof_loss(
 ) -> f64 {
     rel.iter()
         .zip(states)
-        .map(|(q, &s)| {
-            let si = rigid_inverse(&screw_exp(joint_type, axis, pivot, s));
-            dev_from_identity(&(*q * si))
-        })
+        .map(|(q, &s)| dev_from_identity(&unexplained(q, joint_type, axis, pivot, s)))
         .sum()
 }
 
@@ -245,8 +256,7 @@ pub fn fit_screw(rel: &[DMat4], child: PartExtent) -> ScrewFit {
     let pr = point_rms(rel, JointType::Prismatic, pa, DVec3::ZERO, &ps, child);
     // The Occam test applies only when the slide explains the child within its own
     // size; for a pair whose poses fit neither joint the paper's rule decides.
-    let lo = rs.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = rs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let (lo, hi) = state_range(&rs);
     let slide_fits = pr <= SLIDE_FIT * child.radius && hi - lo <= SLIDE_MAX_TURN;
     let revolute = if tie {
         rotates
@@ -294,7 +304,7 @@ pub fn point_rms(
         .iter()
         .zip(states)
         .map(|(q, &s)| {
-            let d = *q * rigid_inverse(&screw_exp(joint_type, axis, pivot, s));
+            let d = unexplained(q, joint_type, axis, pivot, s);
             let r = rot(&d) - DMat3::IDENTITY;
             let frob =
                 r.x_axis.length_squared() + r.y_axis.length_squared() + r.z_axis.length_squared();
