@@ -8,6 +8,7 @@ use glam::{DMat4, DVec3, Vec3};
 use serde::Serialize;
 
 use super::merge::{absorb, merge_parts, MergeEvent, MergeOptions};
+use super::observed::{keep_faithful_poses, object_size, observed_motion};
 use super::project::{motions_from_canonical, project_joints, JointResidual};
 use super::refine::{refine, RefineOptions, RefineReport};
 use super::screw::{state_range, PartExtent};
@@ -26,6 +27,11 @@ pub struct KinOptions {
     pub limit_pad: f64,
     /// `None` skips the refinement (projection only).
     pub refine: Option<RefineOptions>,
+    /// The result's pose of a part at a frame is the model's (forward kinematics) where
+    /// it agrees with the part's observed Step-1 motion within this fraction of the
+    /// object's size, and the observed motion elsewhere (`kinematics::observed`).
+    /// `None` keeps the model's poses everywhere.
+    pub pose_tolerance: Option<f64>,
 }
 
 impl Default for KinOptions {
@@ -34,6 +40,7 @@ impl Default for KinOptions {
             merge: MergeOptions::default(),
             limit_pad: 0.0,
             refine: Some(RefineOptions::default()),
+            pose_tolerance: Some(super::observed::AGREE_TOL),
         }
     }
 }
@@ -57,6 +64,9 @@ pub struct KinReport {
     pub parent: Vec<i64>,
     pub joints: Vec<JointResidual>,
     pub refine: Option<RefineReport>,
+    /// (part, frame) poses where the result reports the observed Step-1 motion because
+    /// the model's disagreed (see `KinOptions::pose_tolerance`).
+    pub poses_replaced: usize,
     /// (stage, seconds) from the caller's clock.
     pub timings: Vec<(String, f64)>,
 }
@@ -282,6 +292,29 @@ pub fn build_articulated(
             refine_report,
         );
     };
+    let mut result = result;
+    let poses_replaced = match opts.pose_tolerance {
+        Some(tol) => {
+            let observed = observed_motion(
+                &points[canonical],
+                &labels[canonical],
+                poses,
+                &merged.map,
+                canonical,
+                &motions_from_canonical(&merged.poses, canonical),
+            );
+            let size = object_size(&points[canonical]);
+            let canon_labels = result.labels[canonical].clone();
+            keep_faithful_poses(
+                &mut result,
+                &observed,
+                &points[canonical],
+                &canon_labels,
+                tol * size,
+            )
+        }
+        None => 0,
+    };
     timings.push(("tree".to_string(), tree_s));
     timings.push(("projection".to_string(), proj_s));
     if opts.refine.is_some() {
@@ -301,6 +334,7 @@ pub fn build_articulated(
         parent,
         joints: residuals,
         refine: refine_report,
+        poses_replaced,
         timings,
     };
     Ok((result, report))

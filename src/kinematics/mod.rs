@@ -4,6 +4,7 @@
 pub mod build;
 pub mod chain;
 pub mod merge;
+pub mod observed;
 pub mod project;
 pub mod refine;
 pub mod screw;

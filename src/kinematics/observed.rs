@@ -1,0 +1,208 @@
+//! The observed motion of each merged part, and which poses the result reports.
+//!
+//! Step 1 moves every point with its own Gaussian. After merging, a part's *observed*
+//! motion at frame t is the rigid transform that best carries the part's canonical
+//! points to where their Gaussians put them (Kabsch over the part's points). The
+//! articulated model (tree, joints, refinement) reproduces that motion only as well as
+//! the tree is right: a wrong parent makes the projected chain bend every descendant,
+//! and the Chamfer refinement then turns even a static root to make up for it (so101,
+//! m = 10: a base that never moves turned 13–45° per frame). The result's `poses`
+//! therefore keep the model's pose of a part only where it agrees with the observed
+//! motion (a denoised version of it, as on panda_gripper's slides) and the observed
+//! motion elsewhere; the joints and the root motion stay the model's.
+
+use glam::{DMat4, DVec3, Vec3};
+
+use crate::fit::pose_init::kabsch;
+use crate::geom::se3::{from_row_major, rigid_inverse, to_row_major};
+use crate::io::result::FitResult;
+
+/// The model's pose of a part at a frame is kept when, over the part's canonical
+/// points, it is within this RMS distance of the observed motion (fraction of the
+/// object's size, the longest side of the canonical points' bounding box).
+pub const AGREE_TOL: f64 = 0.01;
+
+/// `observed[t][p]`: the rigid map from frame `canonical` to frame t that best fits the
+/// Step-1 motion of merged part p's canonical points. `points`/`labels` are the working
+/// clouds with Step-1 labels, `poses[t][g]` the Step-1 poses (only relative motion
+/// matters), `map[g]` the merged part of Step-1 part g. Parts with fewer than three
+/// canonical points move with their largest Step-1 member's pose instead
+/// (`fallback[t][p]`).
+pub fn observed_motion(
+    points: &[Vec3],
+    labels: &[u32],
+    poses: &[Vec<DMat4>],
+    map: &[u32],
+    canonical: usize,
+    fallback: &[Vec<DMat4>],
+) -> Vec<Vec<DMat4>> {
+    let k = poses.len();
+    let parts = fallback.first().map_or(0, Vec::len);
+    let inv_c: Vec<DMat4> = poses[canonical].iter().map(rigid_inverse).collect();
+    // Points of each merged part (canonical frame) with their Step-1 part.
+    let mut members: Vec<Vec<(DVec3, usize)>> = vec![Vec::new(); parts];
+    for (x, &g) in points.iter().zip(labels) {
+        let g = g as usize;
+        if let Some(&p) = map.get(g) {
+            if (p as usize) < parts && g < inv_c.len() {
+                members[p as usize].push((x.as_dvec3(), g));
+            }
+        }
+    }
+    let mut out = fallback.to_vec();
+    for (p, pts) in members.iter().enumerate() {
+        if pts.len() < 3 {
+            continue;
+        }
+        let a: Vec<DVec3> = pts.iter().map(|(x, _)| *x).collect();
+        let w = vec![1.0; a.len()];
+        for (t, frame) in out.iter_mut().enumerate().take(k) {
+            if t == canonical {
+                frame[p] = DMat4::IDENTITY;
+                continue;
+            }
+            let b: Vec<DVec3> = pts
+                .iter()
+                .map(|(x, g)| (poses[t][*g] * inv_c[*g]).transform_point3(*x))
+                .collect();
+            if let Some((r, tr)) = kabsch(&a, &b, &w) {
+                frame[p] = DMat4::from_cols(
+                    r.x_axis.extend(0.0),
+                    r.y_axis.extend(0.0),
+                    r.z_axis.extend(0.0),
+                    tr.extend(1.0),
+                );
+            }
+        }
+    }
+    out
+}
+
+/// Replaces the result's pose of part p at frame t by `observed[t][p]` where the two
+/// disagree by more than `tol` (RMS over the part's canonical points `points` with
+/// result labels `labels`, same units as the points). Returns how many (part, frame)
+/// poses were replaced.
+pub fn keep_faithful_poses(
+    result: &mut FitResult,
+    observed: &[Vec<DMat4>],
+    points: &[Vec3],
+    labels: &[u32],
+    tol: f64,
+) -> usize {
+    let parts = result.parts;
+    let mut by_part: Vec<Vec<DVec3>> = vec![Vec::new(); parts];
+    for (x, &l) in points.iter().zip(labels) {
+        if let Some(v) = by_part.get_mut(l as usize) {
+            v.push(x.as_dvec3());
+        }
+    }
+    let mut replaced = 0;
+    for (t, frame) in result.poses.iter_mut().enumerate() {
+        for (p, pose) in frame.iter_mut().enumerate() {
+            let (Some(obs), Some(pts)) = (observed.get(t).and_then(|f| f.get(p)), by_part.get(p))
+            else {
+                continue;
+            };
+            if pts.is_empty() {
+                continue;
+            }
+            let model = from_row_major(pose);
+            let ms = pts
+                .iter()
+                .map(|x| {
+                    model
+                        .transform_point3(*x)
+                        .distance_squared(obs.transform_point3(*x))
+                })
+                .sum::<f64>()
+                / pts.len() as f64;
+            if ms.sqrt() > tol {
+                *pose = to_row_major(obs);
+                replaced += 1;
+            }
+        }
+    }
+    replaced
+}
+
+/// Longest side of the points' bounding box (the object's size).
+pub fn object_size(points: &[Vec3]) -> f64 {
+    let (lo, hi) = points.iter().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    if points.is_empty() {
+        0.0
+    } else {
+        (hi - lo).max_element() as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DQuat;
+
+    fn rigid(axis: DVec3, angle: f64, t: DVec3) -> DMat4 {
+        DMat4::from_rotation_translation(DQuat::from_axis_angle(axis.normalize(), angle), t)
+    }
+
+    #[test]
+    fn observed_motion_fits_the_members_motions() {
+        // Two Step-1 parts on one merged part, moving almost alike: the observed motion
+        // is their least-squares compromise; frame 0 is canonical.
+        let a = rigid(DVec3::Z, 0.3, DVec3::new(0.1, 0.0, 0.0));
+        let b = rigid(DVec3::Z, 0.32, DVec3::new(0.1, 0.0, 0.0));
+        let poses = vec![vec![DMat4::IDENTITY; 2], vec![a, b]];
+        let pts: Vec<Vec3> = (0..40)
+            .map(|i| {
+                Vec3::new(
+                    (i % 7) as f32 * 0.1,
+                    (i % 5) as f32 * 0.1,
+                    (i % 3) as f32 * 0.1,
+                )
+            })
+            .collect();
+        let labels: Vec<u32> = (0..40).map(|i| (i % 2) as u32).collect();
+        let fallback = vec![vec![DMat4::IDENTITY; 1]; 2];
+        let obs = observed_motion(&pts, &labels, &poses, &[0, 0], 0, &fallback);
+        assert_eq!(obs[0][0], DMat4::IDENTITY);
+        let (_, rot, _) = obs[1][0].to_scale_rotation_translation();
+        let angle = rot.to_axis_angle().1;
+        assert!((angle - 0.31).abs() < 0.005, "angle {angle}");
+        // A single member's motion is reproduced exactly.
+        let obs = observed_motion(&pts, &vec![0; 40], &poses, &[0, 0], 0, &fallback);
+        assert!(obs[1][0].abs_diff_eq(a, 1e-9));
+    }
+
+    #[test]
+    fn only_disagreeing_poses_are_replaced() {
+        let pts: Vec<Vec3> = (0..30)
+            .map(|i| Vec3::new((i % 3) as f32, (i % 5) as f32 * 0.5, (i % 2) as f32))
+            .collect();
+        let labels: Vec<u32> = (0..30).map(|i| (i % 2) as u32).collect();
+        let near = rigid(DVec3::X, 0.001, DVec3::ZERO);
+        let far = rigid(DVec3::X, 0.5, DVec3::ZERO);
+        let mut result = FitResult {
+            format: crate::io::result::FORMAT.to_string(),
+            version: crate::io::result::VERSION,
+            frames: 2,
+            canonical_frame: 0,
+            parts: 2,
+            labels: vec![labels.clone(); 2],
+            poses: vec![vec![to_row_major(&DMat4::IDENTITY); 2]; 2],
+            gaussians: None,
+            tree: None,
+            joints: None,
+            root_motion: None,
+            points: None,
+            info: None,
+        };
+        let observed = vec![vec![DMat4::IDENTITY; 2], vec![near, far]];
+        let n = keep_faithful_poses(&mut result, &observed, &pts, &labels, 0.05);
+        assert_eq!(n, 1);
+        assert_eq!(result.poses[1][0], to_row_major(&DMat4::IDENTITY));
+        assert_eq!(result.poses[1][1], to_row_major(&far));
+        assert!((object_size(&pts) - 2.0).abs() < 1e-6);
+    }
+}
