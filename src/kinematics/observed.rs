@@ -171,7 +171,7 @@ mod tests {
         let angle = rot.to_axis_angle().1;
         assert!((angle - 0.31).abs() < 0.005, "angle {angle}");
         // A single member's motion is reproduced exactly.
-        let obs = observed_motion(&pts, &vec![0; 40], &poses, &[0, 0], 0, &fallback);
+        let obs = observed_motion(&pts, &[0; 40], &poses, &[0, 0], 0, &fallback);
         assert!(obs[1][0].abs_diff_eq(a, 1e-9));
     }
 
