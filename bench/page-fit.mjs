@@ -18,7 +18,7 @@ try {
   await page.locator('#file-input').setInputFiles(files);
   await page.waitForFunction(() => document.querySelectorAll('#frame-list li[data-index]').length >= 2);
   await page.locator(`label:has(input[value=${quality}])`).click();
-  const workers = await page.evaluate(() => Math.max(1, (navigator.hardwareConcurrency || 2) - 1));
+  const workers = await page.evaluate(() => Math.min(navigator.hardwareConcurrency || 2, 8));
   const t0 = Date.now();
   await page.locator('#btn-fit').click();
   await page.waitForSelector('#explore:not([hidden])', { timeout: 60 * 60_000 });

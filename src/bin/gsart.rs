@@ -59,6 +59,10 @@ mod cli {
             /// Also write a URDF of the recovered model.
             #[arg(long)]
             urdf: Option<PathBuf>,
+            /// Also write Steps 2–3's report (merges, pair costs, root, tree, joint
+            /// residuals, refinement, timings) as JSON, to see why a tree came out as it did.
+            #[arg(long)]
+            report: Option<PathBuf>,
             /// No progress bar.
             #[arg(long)]
             quiet: bool,
@@ -149,6 +153,7 @@ mod cli {
                 working_size,
                 ply_out,
                 urdf,
+                report,
                 quiet,
             } => parse_options(
                 parts.as_deref(),
@@ -165,6 +170,7 @@ mod cli {
                     &opts,
                     ply_out.as_deref(),
                     urdf.as_deref(),
+                    report.as_deref(),
                     quiet,
                 )
             }),
@@ -379,6 +385,7 @@ mod cli {
         opts: &FitOptions,
         ply_out: Option<&Path>,
         urdf: Option<&Path>,
+        report: Option<&Path>,
         quiet: bool,
     ) -> Result<()> {
         let t0 = Instant::now();
@@ -424,6 +431,12 @@ mod cli {
                 seq.frames.len(),
                 dir.display()
             );
+        }
+        if let Some(path) = report {
+            let text = serde_json::to_string_pretty(&output.kin)
+                .map_err(|e| Error::InvalidArgument(format!("report: {e}")))?;
+            write_text(path, &text)?;
+            eprintln!("wrote {}", path.display());
         }
         if let Some(path) = urdf {
             let text = pipeline::urdf(result, &seq, "gsart_model")?;

@@ -1,5 +1,5 @@
 // Workers: a helper to run one job in a fresh module worker, and the fit job that
-// runs one worker per candidate part count (at most hardwareConcurrency − 1 at a
+// runs one worker per candidate part count (at most hardwareConcurrency at a
 // time, the rest queued), then one worker for selection + Steps 2–3 + metrics.
 // Cancelling terminates the workers; the page's own data is never handed over
 // (workers get copies), so a cancelled or failed job leaves everything loaded.
@@ -73,9 +73,11 @@ function copies(frames) {
   return { arrays, transfer: arrays.map((a) => a.buffer) };
 }
 
+// One worker per core: the main thread only draws and relays progress, so it does not
+// need a core of its own (finger_edu fast on 2 cores: one worker 44.4 s, two: see README).
 export function maxParallel() {
   const hc = navigator.hardwareConcurrency || 2;
-  return Math.max(1, hc - 1);
+  return Math.max(1, Math.min(hc, 8));
 }
 
 /**
