@@ -8,7 +8,7 @@ use glam::{DMat4, DVec3, Vec3};
 use serde::Serialize;
 
 use super::merge::{absorb, merge_parts, MergeEvent, MergeOptions};
-use super::observed::{keep_faithful_poses, object_size, observed_motion};
+use super::observed::{keep_faithful_poses, object_size, observed_motion, AGREE_SPACINGS};
 use super::project::{motions_from_canonical, project_joints, JointResidual};
 use super::refine::{refine, RefineOptions, RefineReport};
 use super::screw::{state_range, PartExtent};
@@ -29,7 +29,8 @@ pub struct KinOptions {
     pub refine: Option<RefineOptions>,
     /// The result's pose of a part at a frame is the model's (forward kinematics) where
     /// it agrees with the part's observed Step-1 motion within this fraction of the
-    /// object's size, and the observed motion elsewhere (`kinematics::observed`).
+    /// object's size (or `observed::AGREE_SPACINGS` point spacings, when larger), and
+    /// the observed motion elsewhere (`kinematics::observed`).
     /// `None` keeps the model's poses everywhere.
     pub pose_tolerance: Option<f64>,
 }
@@ -310,7 +311,8 @@ pub fn build_articulated(
                 &observed,
                 &points[canonical],
                 &canon_labels,
-                tol * size,
+                points,
+                (tol * size).max(AGREE_SPACINGS * dist.spacing),
             )
         }
         None => 0,
