@@ -43,7 +43,7 @@ use serde::Serialize;
 
 use super::chain::screw_exp;
 use super::project::bfs_order;
-use super::screw::state_range;
+use super::screw::{state_range, unwrap_angles};
 use crate::geom::assignment::Lap;
 use crate::geom::knn::Grid;
 use crate::geom::se3::{from_row_major, to_row_major};
@@ -587,6 +587,10 @@ fn write_back(result: &mut FitResult, m: &Model, x: &[f64], limit_pad: f64) {
             jt.pivot = piv.to_array();
             jt.state = x[b + 6..b + 6 + k].to_vec();
             jt.state[m.c] = 0.0;
+            if jt.joint_type == JointType::Revolute {
+                // Whole turns change no pose; keep the states continuous (sensible limits).
+                jt.state = unwrap_angles(std::mem::take(&mut jt.state));
+            }
             let (lo, hi) = state_range(&jt.state);
             let pad = (hi - lo) * limit_pad;
             jt.limits = [lo - pad, hi + pad];

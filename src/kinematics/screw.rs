@@ -180,6 +180,26 @@ fn project_angle(axis: DVec3, r: &DMat3) -> f64 {
     alpha.atan2(-beta)
 }
 
+/// Angles in (−π, π] made continuous from frame to frame (each within π of the one
+/// before), then shifted by a whole number of turns so that the frame nearest zero
+/// stays there (the canonical frame's 0). A hinge turning past ±π otherwise gets states
+/// like −0.9, 3.7, −2.7 and limits spanning more than a turn (the joint's slider).
+pub fn unwrap_angles(mut a: Vec<f64>) -> Vec<f64> {
+    use std::f64::consts::{PI, TAU};
+    let Some(origin) = (0..a.len()).min_by(|&i, &j| a[i].abs().total_cmp(&a[j].abs())) else {
+        return a;
+    };
+    for k in 1..a.len() {
+        let d = a[k] - a[k - 1];
+        a[k] -= TAU * ((d + PI) / TAU).floor();
+    }
+    let shift = TAU * (a[origin] / TAU).round();
+    for v in &mut a {
+        *v -= shift;
+    }
+    a
+}
+
 /// Point p minimising Σ‖(I − Rₖ) p − tₖ‖², taking the component of every
 /// unconstrained direction (at least the axis) from `reference`.
 fn fit_pivot(rs: &[DMat3], ts: &[DVec3], reference: DVec3) -> DVec3 {
@@ -259,7 +279,7 @@ fn revolute_on(rel: &[DMat4], keep: &[bool], reference: DVec3) -> (DVec3, DVec3,
         .map(|(q, _)| log_rotation(&rot(q)))
         .collect();
     let axis = principal_direction(&logs).unwrap_or(DVec3::Z);
-    let states: Vec<f64> = rel.iter().map(|q| project_angle(axis, &rot(q))).collect();
+    let states = unwrap_angles(rel.iter().map(|q| project_angle(axis, &rot(q))).collect());
     let (rs, ts): (Vec<DMat3>, Vec<DVec3>) = rel
         .iter()
         .zip(&states)
@@ -446,6 +466,23 @@ mod tests {
             .iter()
             .map(|&s| noisy(screw_exp(jt, axis, pivot, s), rng, sigma))
             .collect()
+    }
+
+    #[test]
+    fn angles_unwrap_across_a_half_turn() {
+        let a = unwrap_angles(vec![0.0, -0.93, 3.72, -2.65, 3.54, -2.83]);
+        let tau = std::f64::consts::TAU;
+        let want = [0.0, -0.93, 3.72 - tau, -2.65, 3.54 - tau, -2.83];
+        for (x, y) in a.iter().zip(want) {
+            assert!((x - y).abs() < 1e-12, "{a:?}");
+        }
+        // The zero (canonical) frame stays at zero when it is not the first.
+        let a = unwrap_angles(vec![3.0, -3.1, 0.0, 0.5]);
+        let want = [3.0 - tau, -3.1, 0.0, 0.5];
+        for (x, y) in a.iter().zip(want) {
+            assert!((x - y).abs() < 1e-12, "{a:?}");
+        }
+        assert!(unwrap_angles(Vec::new()).is_empty());
     }
 
     #[test]
