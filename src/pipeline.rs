@@ -190,6 +190,9 @@ pub fn finish(
         // their motion is noisier than the joint model's: bench-dev occluded fast,
         // recon 15.64 with the model's poses vs 16.35 with the observed motion.
         kin_opts.pose_tolerance = None;
+        // Neither does the ICP polish help there (partial clouds): recon 15.56 vs
+        // 15.70 without, flow 17.94 vs 17.48.
+        kin_opts.polish = false;
     }
     let (mut result, kin) = crate::kinematics::build_articulated(
         &points,

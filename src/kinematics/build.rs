@@ -8,7 +8,10 @@ use glam::{DMat4, DVec3, Vec3};
 use serde::Serialize;
 
 use super::merge::{absorb, merge_parts, MergeEvent, MergeOptions};
-use super::observed::{keep_faithful_poses, object_size, observed_motion, AGREE_SPACINGS};
+use super::observed::{
+    keep_faithful_poses, object_size, observed_motion, polish_poses, AGREE_SPACINGS, POLISH_KEEP,
+    POLISH_ROUNDS,
+};
 use super::project::{motions_from_canonical, project_joints, JointResidual};
 use super::refine::{refine, RefineOptions, RefineReport};
 use super::screw::{state_range, PartExtent};
@@ -33,6 +36,10 @@ pub struct KinOptions {
     /// the observed motion elsewhere (`kinematics::observed`).
     /// `None` keeps the model's poses everywhere.
     pub pose_tolerance: Option<f64>,
+    /// Finally polish every part's pose per frame by trimmed ICP of its points to the
+    /// frame's cloud (`observed::polish_poses`; bench-dev full fast recon 1.26 → 1.07,
+    /// flow 1.48 → 1.24).
+    pub polish: bool,
 }
 
 impl Default for KinOptions {
@@ -42,6 +49,7 @@ impl Default for KinOptions {
             limit_pad: 0.0,
             refine: Some(RefineOptions::default()),
             pose_tolerance: Some(super::observed::AGREE_TOL),
+            polish: true,
         }
     }
 }
@@ -317,6 +325,17 @@ pub fn build_articulated(
         }
         None => 0,
     };
+    if opts.polish {
+        let canon_labels = result.labels[canonical].clone();
+        polish_poses(
+            &mut result,
+            &points[canonical],
+            &canon_labels,
+            points,
+            POLISH_ROUNDS,
+            POLISH_KEEP,
+        );
+    }
     timings.push(("tree".to_string(), tree_s));
     timings.push(("projection".to_string(), proj_s));
     if opts.refine.is_some() {
