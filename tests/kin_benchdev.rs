@@ -49,6 +49,7 @@ fn check(
     seq: &Seq,
     res: &FitResult,
     rep: &gsart::kinematics::KinReport,
+    fk_exact: bool,
     failures: &mut Vec<String>,
 ) -> Errors {
     let merged_ok = rep.parts == seq.gt.num_parts
@@ -63,7 +64,11 @@ fn check(
             seq.name, rep.merge_log
         ));
     }
-    assert_fk_consistent(&seq.name, res);
+    if fk_exact {
+        assert_fk_consistent(&seq.name, res);
+    } else {
+        res.validate(&seq.name).unwrap();
+    }
     let e = evaluate(seq, res);
     if e.tree_mismatch != 0 || e.type_errors != 0 || e.max_axis_deg > 5.0 || e.max_pivot > 0.02 {
         failures.push(format!(
@@ -84,13 +89,14 @@ fn gt_input_recovers_tree_and_joints() {
     let mut failures = Vec::new();
     for dir in seqs {
         let seq = load(&dir);
-        // Projection only: exact on exact input.
+        // Projection only, poses not polished: exact on exact input.
         let opts = KinOptions {
             refine: None,
+            polish: false,
             ..Default::default()
         };
         let (res, rep, secs) = run(&seq, &opts);
-        let e = check(&seq, &res, &rep, &mut failures);
+        let e = check(&seq, &res, &rep, true, &mut failures);
         eprintln!(
             "{:<18} projection: parts {:>2}/{:<2} root {:>2} tree-mismatch {} type-errors {} max-axis {:.4}° max-pivot {:.5} spacing {:.4} merges {} ({secs:.2}s)",
             seq.name, rep.parts, seq.gt.num_parts, e.root, e.tree_mismatch, e.type_errors,
@@ -107,11 +113,36 @@ fn gt_input_recovers_tree_and_joints() {
         }
         // With refinement (Chamfer against the observed clouds).
         let (res, rep, secs) = run(&seq, &KinOptions::default());
-        let e = check(&seq, &res, &rep, &mut failures);
+        // The reported poses are not all the refined chain's: where the refinement
+        // moved a part off its observed motion (the true one here) and the data agree,
+        // the observed motion is reported, then every pose is polished against the
+        // clouds (`kinematics::observed`). They stay close to the truth.
+        let e = check(&seq, &res, &rep, false, &mut failures);
+        // Mean displacement ×100 of the canonical points between the reported and the
+        // true motion (the reconstruction error with ground-truth labels).
+        let (mut sum, mut n) = (0.0f64, 0usize);
+        for t in 0..res.frames {
+            for (x, &l) in seq.points[0].iter().zip(&seq.labels[0]) {
+                let p = l as usize;
+                let m = gsart::geom::se3::from_row_major(&res.poses[t][p]);
+                let obs: DMat4 =
+                    seq.gt.poses[t][p] * gsart::geom::se3::rigid_inverse(&seq.gt.poses[0][p]);
+                let x = x.as_dvec3();
+                sum += (m.transform_point3(x) - obs.transform_point3(x)).length();
+                n += 1;
+            }
+        }
+        let off = 100.0 * sum / n.max(1) as f64;
+        if off > 0.2 {
+            failures.push(format!(
+                "{}: reported poses {off:.3} off the truth",
+                seq.name
+            ));
+        }
         let r = rep.refine.as_ref().unwrap();
         eprintln!(
-            "{:<18} refined:    accepted {} loss {:.6} -> {:.6} max-axis {:.4}° max-pivot {:.5} ({secs:.2}s)",
-            seq.name, r.accepted, r.loss_before, r.loss_after, e.max_axis_deg, e.max_pivot
+            "{:<18} refined:    accepted {} loss {:.6} -> {:.6} max-axis {:.4}° max-pivot {:.5} poses replaced {} off the truth {off:.3} ({secs:.2}s)",
+            seq.name, r.accepted, r.loss_before, r.loss_after, e.max_axis_deg, e.max_pivot, rep.poses_replaced
         );
     }
     assert!(failures.is_empty(), "{failures:#?}");
