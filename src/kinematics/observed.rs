@@ -264,6 +264,25 @@ mod tests {
     use super::*;
     use glam::DQuat;
 
+    /// A two-frame, two-part result with these canonical labels and poses.
+    fn result_with(labels: &[u32], poses: Vec<Vec<[f64; 16]>>) -> FitResult {
+        FitResult {
+            format: crate::io::result::FORMAT.to_string(),
+            version: crate::io::result::VERSION,
+            frames: 2,
+            canonical_frame: 0,
+            parts: 2,
+            labels: vec![labels.to_vec(); 2],
+            poses,
+            gaussians: None,
+            tree: None,
+            joints: None,
+            root_motion: None,
+            points: None,
+            info: None,
+        }
+    }
+
     fn rigid(axis: DVec3, angle: f64, t: DVec3) -> DMat4 {
         DMat4::from_rotation_translation(DQuat::from_axis_angle(axis.normalize(), angle), t)
     }
@@ -304,21 +323,7 @@ mod tests {
         let labels: Vec<u32> = (0..30).map(|i| (i % 2) as u32).collect();
         let near = rigid(DVec3::X, 0.001, DVec3::ZERO);
         let far = rigid(DVec3::X, 0.5, DVec3::ZERO);
-        let mut result = FitResult {
-            format: crate::io::result::FORMAT.to_string(),
-            version: crate::io::result::VERSION,
-            frames: 2,
-            canonical_frame: 0,
-            parts: 2,
-            labels: vec![labels.clone(); 2],
-            poses: vec![vec![to_row_major(&DMat4::IDENTITY); 2]; 2],
-            gaussians: None,
-            tree: None,
-            joints: None,
-            root_motion: None,
-            points: None,
-            info: None,
-        };
+        let mut result = result_with(&labels, vec![vec![to_row_major(&DMat4::IDENTITY); 2]; 2]);
         // Frame 1's cloud: part 0 where the model puts it, part 1 where the observed
         // motion puts it (the model got part 1 wrong).
         let frame1: Vec<Vec3> = pts
@@ -377,24 +382,13 @@ mod tests {
             .map(|x| truth.transform_point3(x.as_dvec3()).as_vec3())
             .collect();
         let off = truth * rigid(DVec3::Z, 0.1, DVec3::ZERO);
-        let mut result = FitResult {
-            format: crate::io::result::FORMAT.to_string(),
-            version: crate::io::result::VERSION,
-            frames: 2,
-            canonical_frame: 0,
-            parts: 2,
-            labels: vec![labels.clone(); 2],
-            poses: vec![
+        let mut result = result_with(
+            &labels,
+            vec![
                 vec![to_row_major(&DMat4::IDENTITY); 2],
                 vec![to_row_major(&off), to_row_major(&truth)],
             ],
-            gaussians: None,
-            tree: None,
-            joints: None,
-            root_motion: None,
-            points: None,
-            info: None,
-        };
+        );
         let before = result.poses.clone();
         polish_poses(
             &mut result,
