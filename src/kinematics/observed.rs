@@ -167,8 +167,44 @@ pub fn polish_poses(
     rounds: usize,
     keep: f64,
 ) {
-    let c = result.canonical_frame;
-    let mut by_part: Vec<Vec<DVec3>> = vec![Vec::new(); result.parts];
+    let mut motions: Vec<Vec<DMat4>> = result
+        .poses
+        .iter()
+        .map(|f| f.iter().map(from_row_major).collect())
+        .collect();
+    polish_motions(
+        &mut motions,
+        result.canonical_frame,
+        points,
+        labels,
+        frames,
+        rounds,
+        keep,
+        POLISH_GAIN,
+    );
+    for (f, m) in result.poses.iter_mut().zip(&motions) {
+        for (pose, mo) in f.iter_mut().zip(m) {
+            *pose = to_row_major(mo);
+        }
+    }
+}
+
+/// [`polish_poses`] on motions `motions[t][p]` (frame `canonical` → t); a polished
+/// pose is taken when it fits `gain` better.
+#[allow(clippy::too_many_arguments)]
+pub fn polish_motions(
+    motions: &mut [Vec<DMat4>],
+    canonical: usize,
+    points: &[Vec3],
+    labels: &[u32],
+    frames: &[Vec<Vec3>],
+    rounds: usize,
+    keep: f64,
+    gain: f64,
+) {
+    let parts = motions.first().map_or(0, Vec::len);
+    let c = canonical;
+    let mut by_part: Vec<Vec<DVec3>> = vec![Vec::new(); parts];
     for (x, &l) in points.iter().zip(labels) {
         if let Some(v) = by_part.get_mut(l as usize) {
             v.push(x.as_dvec3());
@@ -176,7 +212,7 @@ pub fn polish_poses(
     }
     let mut dst = Vec::new();
     let mut buf = Vec::new();
-    for (t, frame) in result.poses.iter_mut().enumerate() {
+    for (t, frame) in motions.iter_mut().enumerate() {
         let Some(cloud) = frames.get(t).filter(|c| !c.is_empty()) else {
             continue;
         };
@@ -189,7 +225,7 @@ pub fn polish_poses(
             if pts.len() < 16 {
                 continue;
             }
-            let start = from_row_major(pose);
+            let start = *pose;
             let mut mo = start;
             for _ in 0..rounds {
                 dst.clear();
@@ -213,8 +249,8 @@ pub fn polish_poses(
                 }
             }
             let before = trimmed_fit(&grid, pts, &start, keep, &mut buf);
-            if trimmed_fit(&grid, pts, &mo, keep, &mut buf) < (1.0 - POLISH_GAIN) * before {
-                *pose = to_row_major(&mo);
+            if trimmed_fit(&grid, pts, &mo, keep, &mut buf) < (1.0 - gain) * before {
+                *pose = mo;
             }
         }
     }
