@@ -22,18 +22,20 @@ pub fn to_nested(m: &DMat4) -> [[f64; 4]; 4] {
     m.transpose().to_cols_array_2d()
 }
 
+/// The rigid transform x ↦ r x + t.
+pub fn rigid(r: DMat3, t: DVec3) -> DMat4 {
+    DMat4::from_cols(
+        r.x_axis.extend(0.0),
+        r.y_axis.extend(0.0),
+        r.z_axis.extend(0.0),
+        t.extend(1.0),
+    )
+}
+
 /// Inverse of a rigid transform (cheaper and more exact than a general inverse).
 pub fn rigid_inverse(m: &DMat4) -> DMat4 {
-    let r = DMat3::from_mat4(*m);
-    let t = m.w_axis.truncate();
-    let rt = r.transpose();
-    let ti: DVec3 = -(rt * t);
-    DMat4::from_cols(
-        rt.x_axis.extend(0.0),
-        rt.y_axis.extend(0.0),
-        rt.z_axis.extend(0.0),
-        ti.extend(1.0),
-    )
+    let rt = DMat3::from_mat4(*m).transpose();
+    rigid(rt, -(rt * m.w_axis.truncate()))
 }
 
 #[cfg(test)]

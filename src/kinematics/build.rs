@@ -37,7 +37,7 @@ pub struct KinOptions {
     /// `None` keeps the model's poses everywhere.
     pub pose_tolerance: Option<f64>,
     /// Build the tree and joints from each part's observed motion polished by trimmed
-    /// ICP of its points to each frame's cloud (`observed_input`), and finally polish
+    /// ICP of its points to each frame's cloud (`polished_input`), and finally polish
     /// the reported poses the same way (`observed::polish_poses`). Bench-dev full fast:
     /// the final polish took recon 1.26 → 1.07, flow 1.48 → 1.24; building from the
     /// polished motion then TED 2.86 → 2.57, re-animation 3.17 → 2.92.
@@ -222,24 +222,33 @@ fn progress_to(
     }
 }
 
-/// Each merged part's observed Step-1 motion (`observed::observed_motion`), polished
-/// against the clouds (`observed::polish_motions`): the poses the tree and the joints are
-/// built from.
-fn observed_input(
+/// Each merged part's observed Step-1 motion (`observed::observed_motion`).
+fn observed_of(
     points: &[Vec<Vec3>],
     labels: &[Vec<u32>],
     poses: &[Vec<DMat4>],
     merged: &super::merge::MergeOutcome,
     canonical: usize,
 ) -> Vec<Vec<DMat4>> {
-    let mut obs = observed_motion(
+    observed_motion(
         &points[canonical],
         &labels[canonical],
         poses,
         &merged.map,
         canonical,
         &motions_from_canonical(&merged.poses, canonical),
-    );
+    )
+}
+
+/// The observed motion `obs` polished against the clouds (`observed::polish_motions`):
+/// the poses the tree and the joints are built from.
+fn polished_input(
+    mut obs: Vec<Vec<DMat4>>,
+    points: &[Vec<Vec3>],
+    labels: &[Vec<u32>],
+    merged: &super::merge::MergeOutcome,
+    canonical: usize,
+) -> Vec<Vec<DMat4>> {
     let merged_labels: Vec<u32> = labels[canonical]
         .iter()
         .map(|&g| merged.map.get(g as usize).copied().unwrap_or(0))
@@ -289,11 +298,14 @@ pub fn build_articulated(
     // Tree and joints; a joint that does not move (after the projection, or after
     // the refinement) absorbs its child into its parent, and the tree is built again.
     let (mut tree_s, mut proj_s, mut refine_s) = (0.0, 0.0, 0.0);
-    let (parts, dist, costs, root, parent, result, residuals, refine_report) = loop {
+    let (parts, dist, costs, root, parent, result, residuals, refine_report, observed) = loop {
         // The tree and the joints are built from each part's observed motion, polished
-        // against the clouds (`observed_input`), not from its largest Gaussian's pose.
+        // against the clouds (`polished_input`), not from its largest Gaussian's pose.
+        // Parts too small for either keep the largest Gaussian's pose, so the observed
+        // motion is the same whether taken before or after this replacement.
+        let observed = observed_of(points, labels, poses, &merged, canonical);
         if opts.polish {
-            merged.poses = observed_input(points, labels, poses, &merged, canonical);
+            merged.poses = polished_input(observed.clone(), points, labels, &merged, canonical);
         }
         let ta = clock();
         let new_labels: Vec<Vec<u32>> = labels
@@ -344,21 +356,14 @@ pub fn build_articulated(
             result,
             residuals,
             refine_report,
+            observed,
         );
     };
     let mut result = result;
+    let canon_labels = result.labels[canonical].clone();
     let poses_replaced = match opts.pose_tolerance {
         Some(tol) => {
-            let observed = observed_motion(
-                &points[canonical],
-                &labels[canonical],
-                poses,
-                &merged.map,
-                canonical,
-                &motions_from_canonical(&merged.poses, canonical),
-            );
             let size = object_size(&points[canonical]);
-            let canon_labels = result.labels[canonical].clone();
             keep_faithful_poses(
                 &mut result,
                 &observed,
@@ -371,7 +376,6 @@ pub fn build_articulated(
         None => 0,
     };
     if opts.polish {
-        let canon_labels = result.labels[canonical].clone();
         polish_poses(
             &mut result,
             &points[canonical],

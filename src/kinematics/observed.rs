@@ -15,7 +15,7 @@ use glam::{DMat4, DVec3, Vec3};
 
 use crate::fit::pose_init::{kabsch, kabsch_trimmed};
 use crate::geom::knn::Grid;
-use crate::geom::se3::{from_row_major, rigid_inverse, to_row_major};
+use crate::geom::se3::{from_row_major, rigid, rigid_inverse, to_row_major};
 use crate::io::result::FitResult;
 
 /// The model's pose of a part at a frame is kept when, over the part's canonical
@@ -74,12 +74,7 @@ pub fn observed_motion(
                 .map(|(x, g)| (poses[t][*g] * inv_c[*g]).transform_point3(*x))
                 .collect();
             if let Some((r, tr)) = kabsch(&a, &b, &w) {
-                frame[p] = DMat4::from_cols(
-                    r.x_axis.extend(0.0),
-                    r.y_axis.extend(0.0),
-                    r.z_axis.extend(0.0),
-                    tr.extend(1.0),
-                );
+                frame[p] = rigid(r, tr);
             }
         }
     }
@@ -101,13 +96,7 @@ pub fn keep_faithful_poses(
     frames: &[Vec<Vec3>],
     tol: f64,
 ) -> usize {
-    let parts = result.parts;
-    let mut by_part: Vec<Vec<DVec3>> = vec![Vec::new(); parts];
-    for (x, &l) in points.iter().zip(labels) {
-        if let Some(v) = by_part.get_mut(l as usize) {
-            v.push(x.as_dvec3());
-        }
-    }
+    let by_part = points_by_part(points, labels, result.parts);
     let cap2 = (25.0 * tol * tol) as f32;
     let mut replaced = 0;
     for (t, frame) in result.poses.iter_mut().enumerate() {
@@ -202,21 +191,14 @@ pub fn polish_motions(
     keep: f64,
     gain: f64,
 ) {
-    let parts = motions.first().map_or(0, Vec::len);
-    let c = canonical;
-    let mut by_part: Vec<Vec<DVec3>> = vec![Vec::new(); parts];
-    for (x, &l) in points.iter().zip(labels) {
-        if let Some(v) = by_part.get_mut(l as usize) {
-            v.push(x.as_dvec3());
-        }
-    }
+    let by_part = points_by_part(points, labels, motions.first().map_or(0, Vec::len));
     let mut dst = Vec::new();
     let mut buf = Vec::new();
     for (t, frame) in motions.iter_mut().enumerate() {
         let Some(cloud) = frames.get(t).filter(|c| !c.is_empty()) else {
             continue;
         };
-        if t == c {
+        if t == canonical {
             continue;
         }
         let grid = Grid::new(cloud);
@@ -237,14 +219,7 @@ pub fn polish_motions(
                     );
                 }
                 match kabsch_trimmed(pts, &dst, keep) {
-                    Some((r, tr)) => {
-                        mo = DMat4::from_cols(
-                            r.x_axis.extend(0.0),
-                            r.y_axis.extend(0.0),
-                            r.z_axis.extend(0.0),
-                            tr.extend(1.0),
-                        )
-                    }
+                    Some((r, tr)) => mo = rigid(r, tr),
                     None => break,
                 }
             }
@@ -254,6 +229,17 @@ pub fn polish_motions(
             }
         }
     }
+}
+
+/// The points of each of `parts` parts (labels out of range are skipped).
+fn points_by_part(points: &[Vec3], labels: &[u32], parts: usize) -> Vec<Vec<DVec3>> {
+    let mut by_part: Vec<Vec<DVec3>> = vec![Vec::new(); parts];
+    for (x, &l) in points.iter().zip(labels) {
+        if let Some(v) = by_part.get_mut(l as usize) {
+            v.push(x.as_dvec3());
+        }
+    }
+    by_part
 }
 
 /// Mean of the `keep` fraction of smallest squared distances from the moved points to
