@@ -671,9 +671,20 @@ fn select_by_coverage(
                 .map(|x| data.grids[t].nearest_d2_capped(x.as_vec3(), CAP2 as f32) as f64)
                 .sum();
             fj.push(f);
+            // Targets outside the moved group's box grown by the cap are at the cap:
+            // a Gaussian covers a small part of the frame, so most skip the scan.
+            let reach = DVec3::splat(CAP2.sqrt());
+            let (lo, hi) = moved.iter().fold(
+                (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+                |(lo, hi), x| (lo.min(*x), hi.max(*x)),
+            );
+            let (lo, hi) = (lo - reach, hi + reach);
             rj.push(
                 ys.iter()
                     .map(|y| {
+                        if y.cmplt(lo).any() || y.cmpgt(hi).any() {
+                            return CAP2;
+                        }
                         moved
                             .iter()
                             .map(|x| x.distance_squared(*y))

@@ -27,12 +27,15 @@
 //! settle instead of jittering at the step size, plus a small prior that keeps revolute
 //! axes near their projection where the data do not see them (see `axis_prior`).
 //!
-//! Sample size: 2048 points per frame (all of a 2048-point frame), 200 iterations. With
-//! 384 points the Chamfer's sampling noise hid the procedural laptop's 2 % pivot error
-//! (refinement rejected; axis 2.7°, pivot 2.1 %); with 2048 it is accepted and reaches
-//! 0.7° / 0.5 % (loss identical at 200 and 500 iterations). bench-dev full, fast, end to
-//! end: mean flow 3.28 → 3.15, recon 2.77 → 2.77, finger_edu recon 0.64 → 0.45,
-//! panda_gripper 1.15 → 0.43; costs ≈ 1.5 s more per sequence natively.
+//! Sample size: whole frames up to 2048 points, else 1024 points per frame; 200
+//! iterations. The Chamfer's sampling noise hides small errors: on the procedural
+//! laptop (2048-point frames) 384 points left a 2 % pivot error (refinement rejected;
+//! axis 2.7°, pivot 2.1 %), 1024 points 2.3 % (seed 3), the whole frames 0.7° / 0.5 %
+//! (loss identical at 200 and 500 iterations). On bench-dev (4096-point frames,
+//! fast, end to end at the selected part counts) 1024 points match 2048 — recon 1.077
+//! → 1.075, flow 1.204 → 1.199, re-animation 2.92 → 2.90, TED 2.57 both — at half the
+//! cost (the refinement was ≈ 30 % of a one-candidate fit, nearly all of it
+//! nearest-neighbour queries).
 //!
 //! The refined model is kept only if it lowers the loss on a second seeded subsample
 //! (independent of the first when frames hold more points than the sample).
@@ -56,8 +59,11 @@ use crate::pipeline::{Control, Progress, Stage};
 pub struct RefineOptions {
     pub iters: usize,
     pub lr: f64,
-    /// Points sampled per frame (source and target).
+    /// Points sampled per frame (source and target) ...
     pub sample: usize,
+    /// ... unless every frame has at most this many points: then all of them (an
+    /// exact Chamfer without sampling noise, see the module doc).
+    pub whole_up_to: usize,
     /// Also refine the root motion.
     pub root: bool,
     pub seed: u64,
@@ -82,7 +88,8 @@ impl Default for RefineOptions {
         RefineOptions {
             iters: 200,
             lr: 1.5e-2,
-            sample: 2048,
+            sample: 1024,
+            whole_up_to: 2048,
             axis_prior: 1e-4,
             root: true,
             seed: 0,
@@ -505,11 +512,17 @@ pub fn refine(
         ));
     }
     let mut rng = StdRng::seed_from_u64(opts.seed);
-    let train = build_data(result, points, opts.sample, &mut rng);
+    let largest = points.iter().map(Vec::len).max().unwrap_or(0);
+    let n = if largest <= opts.whole_up_to {
+        largest
+    } else {
+        opts.sample
+    };
+    let train = build_data(result, points, n, &mut rng);
     // With frames no larger than the sample both subsamples are the whole clouds:
     // evaluate on the training data instead of building it again.
-    let whole = points.iter().all(|f| f.len() <= opts.sample);
-    let eval_own = (!whole).then(|| build_data(result, points, opts.sample, &mut rng));
+    let whole = largest <= n;
+    let eval_own = (!whole).then(|| build_data(result, points, n, &mut rng));
     let eval = eval_own.as_ref().unwrap_or(&train);
     let mut lap = Lap::default();
     let use_emd = opts.lambda_emd > 0.0 && opts.emd_sample > 0;
