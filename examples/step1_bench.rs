@@ -54,6 +54,8 @@ fn main() {
     let mut pose: Option<gsart::fit::pose_init::PoseInitOpts> = Some(Default::default());
     let mut search: Option<gsart::fit::pose_search::PoseSearchOpts> = Some(Default::default());
     let mut mseg: Option<gsart::fit::motion_seg::MotionSegOpts> = Some(Default::default());
+    // Re-segmentation rounds: the quality preset's unless --ms-rounds is given.
+    let mut ms_rounds: Option<usize> = None;
     let mut i = 0;
     while i < args.len() {
         let a = args[i].as_str();
@@ -97,11 +99,7 @@ fn main() {
             "--no-pose-init" => pose = None,
             "--no-search" => search = None,
             "--no-mseg" => mseg = None,
-            "--ms-rounds" => {
-                if let Some(o) = mseg.as_mut() {
-                    o.rounds = val().parse().expect("ms-rounds")
-                }
-            }
+            "--ms-rounds" => ms_rounds = Some(val().parse().expect("ms-rounds")),
             "--ms-on" => mseg = Some(Default::default()),
             "--ps-on" => search = Some(Default::default()),
             "--ms-near" => {
@@ -196,7 +194,10 @@ fn main() {
                 cfg.track_init = !notrack;
                 cfg.pose_init = pose;
                 cfg.pose_search = search;
-                cfg.motion_seg = mseg;
+                cfg.motion_seg = mseg.map(|mut o| {
+                    o.rounds = ms_rounds.unwrap_or(prep.sched.reseg_rounds);
+                    o
+                });
                 if let Some(v) = lr {
                     cfg.sched.lr = v;
                     if let Some(o) = cfg.pose_search.as_mut() {

@@ -106,6 +106,10 @@ pub struct FitConfig {
 
 impl FitConfig {
     pub fn new(sched: Schedule, occlusion: bool, seed: u64) -> Self {
+        let motion_seg = MotionSegOpts {
+            rounds: sched.reseg_rounds,
+            ..Default::default()
+        };
         FitConfig {
             sched,
             occlusion,
@@ -116,7 +120,7 @@ impl FitConfig {
             track_iters: 100,
             pose_init: Some(PoseInitOpts::default()),
             pose_search: Some(PoseSearchOpts::default()),
-            motion_seg: Some(MotionSegOpts::default()),
+            motion_seg: Some(motion_seg),
             report_every: 10,
             snapshot_every: 50,
         }

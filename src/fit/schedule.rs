@@ -23,6 +23,14 @@ pub struct Schedule {
     pub emd_n: usize,
     /// An EMD assignment of a frame pair is re-solved every this many uses.
     pub emd_refresh: usize,
+    /// Motion re-segmentation rounds after the global pose search, each followed by
+    /// a new search (`fit::motion_seg`). Measured (bench-dev full, the seven robots
+    /// at their selected part counts, end to end): Fast with 1 / 2 / 3 rounds mean
+    /// recon 1.82 / 1.08 / 0.98, TED 2.29 / 2.57 / 2.57, RI 0.881 / 0.893 / 0.890;
+    /// Balanced with 2 / 3 rounds recon 1.11 / 0.93, flow 1.27 / 1.01, TED 3.00 /
+    /// 2.14, re-animation 3.20 / 2.92, RI 0.887 / 0.892. A round costs about a third
+    /// of the search.
+    pub reseg_rounds: usize,
 }
 
 impl Schedule {
@@ -39,6 +47,10 @@ impl Schedule {
             (Quality::Fast, false) => (1_200, 400),
             (Quality::Fast, true) => (800, 300),
         };
+        let reseg_rounds = match q {
+            Quality::Fast => 2,
+            Quality::Balanced | Quality::Paper => 3,
+        };
         Schedule {
             iters,
             emd_start,
@@ -48,6 +60,7 @@ impl Schedule {
             batch: 512,
             emd_n: 128,
             emd_refresh: 4,
+            reseg_rounds,
         }
     }
 
