@@ -538,12 +538,16 @@ async function startFit() {
   S.chart.clear('Step 1 loss');
   fitUi(true);
   setStepActive('step-fit');
-  const par = Math.min(maxParallel(), range[1] - range[0] + 1);
-  $('fit-status').innerHTML = `Trying ${range[0] === range[1] ? `m = ${range[0]}` : `m = ${range[0]}…${range[1]}`} Gaussians`
-    + ` (${par} in parallel), ${opts.quality} quality.`;
+  // The core decides which part counts a quality tries (fast: every other one).
+  const parts = Array.from(wasm.candidate_parts(range[0], range[1], opts));
+  const par = Math.min(maxParallel(), parts.length);
+  const whole = parts.length === range[1] - range[0] + 1;
+  const tried = range[0] === range[1] ? `m = ${range[0]}`
+    : whole ? `m = ${range[0]}…${range[1]}` : `m = ${parts.join(', ')} of ${range[0]}…${range[1]}`;
+  $('fit-status').innerHTML = `Trying ${tried} Gaussians (${par} in parallel), ${opts.quality} quality.`;
   const cands = new Map(); // m -> {iter, total, done}
   let totalGuess = 0;
-  const nCand = range[1] - range[0] + 1;
+  const nCand = parts.length;
   const step1Progress = () => {
     let done = 0, tot = 0;
     for (const c of cands.values()) { done += c.done ? c.total : c.iter; tot += c.total; }
@@ -563,7 +567,7 @@ async function startFit() {
     frames: good.map((f) => f.points),
     names: good.map((f) => f.name),
     options: opts,
-    range,
+    parts,
     gt: gtOk ? S.gt : null,
     labels: gtOk ? good.map((f) => f.labels) : null,
     bestOf: (ms, losses) => wasm.best_candidate(Uint32Array.from(ms), Float64Array.from(losses)),

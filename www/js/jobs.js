@@ -87,12 +87,11 @@ export function maxParallel() {
  * Resolves with {result, metrics, metricsError, candidates: [{m, loss, ms}], best}.
  */
 export class FitJob {
-  constructor({ frames, names, options, range, gt, labels, bestOf, callbacks }) {
+  constructor({ frames, names, options, parts, gt, labels, bestOf, callbacks }) {
     this.frames = frames;
     this.names = names;
     this.options = options;
-    this.ms = [];
-    for (let m = range[0]; m <= range[1]; m++) this.ms.push(m);
+    this.ms = [...parts];
     this.gt = gt;
     this.labels = labels;
     this.bestOf = bestOf;
