@@ -25,7 +25,8 @@ try {
   const seconds = (Date.now() - t0) / 1000;
   const summary = await page.locator('#explore').innerText();
   const metrics = await page.locator('#metrics').innerText().catch(() => '');
-  console.log(JSON.stringify({ sequence: seq, quality, workers, seconds, summary: summary.split('\n').slice(0, 3), metrics }, null, 1));
+  const status = await page.locator('#fit-status').innerText();
+  console.log(JSON.stringify({ sequence: seq, quality, workers, seconds, status, summary: summary.split('\n').slice(0, 3), metrics }, null, 1));
 } finally {
   await browser.close();
   srv.server.close();

@@ -1,6 +1,7 @@
 // Live loss plot on a small 2D canvas: one line per series (a candidate part
 // count, or a refinement stage), log-scaled y, x = iteration fraction.
 
+const MIN_MS = 250;
 const COLORS = ['#4cc9f0', '#f72585', '#ffc15e', '#52d49b', '#b388ff', '#ff8a5b', '#7ee0ff', '#ff9ecd', '#c3f584'];
 
 export class LossChart {
@@ -31,10 +32,12 @@ export class LossChart {
     this.schedule();
   }
 
+  // At most one redraw per MIN_MS: points arrive up to 40 times a second, and each
+  // repaint takes CPU from the workers fitting on the same cores.
   schedule() {
     if (this.pending) return;
     this.pending = true;
-    requestAnimationFrame(() => { this.pending = false; this.draw(); });
+    setTimeout(() => requestAnimationFrame(() => { this.pending = false; this.draw(); }), MIN_MS);
   }
 
   draw() {
