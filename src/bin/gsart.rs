@@ -42,7 +42,9 @@ mod cli {
             /// Step-1 iterations per candidate (overrides the quality preset).
             #[arg(long)]
             iters: Option<usize>,
-            /// Quality preset: fast, balanced or paper.
+            /// Quality preset: fast (every other part count of the range, two motion
+            /// re-segmentation rounds), balanced (every part count, three rounds) or
+            /// paper (the paper's iteration counts).
             #[arg(long, default_value = "balanced")]
             quality: String,
             /// Occlusion handling: auto, on or off.
