@@ -14,6 +14,7 @@ use nalgebra::{Matrix3, Vector3};
 use super::fitter::Data;
 use super::flow::{OtFlow, SceneFlow};
 use super::gaussians::{argmin_maha, Gauss, Params};
+use crate::geom::knn::Grid;
 
 /// Options of the pose initialisation.
 #[derive(Debug, Clone, Copy)]
@@ -76,6 +77,44 @@ pub fn kabsch(a: &[DVec3], b: &[DVec3], w: &[f64]) -> Option<(DMat3, DVec3)> {
         DVec3::new(r[(0, 2)], r[(1, 2)], r[(2, 2)]),
     );
     Some((rm, cb - rm * ca))
+}
+
+/// Trimmed ICP of `pts` into a cloud indexed by `grid` (`cloud(j)` is its point j),
+/// from the motion x ↦ r x + c: `rounds` rounds of nearest neighbours and
+/// `kabsch_trimmed` on the `keep` fraction of closest pairs, stopping early when
+/// Kabsch fails. `dst` is scratch.
+pub fn trimmed_icp(
+    grid: &Grid,
+    cloud: impl Fn(usize) -> DVec3,
+    pts: &[DVec3],
+    mut mo: (DMat3, DVec3),
+    rounds: usize,
+    keep: f64,
+    dst: &mut Vec<DVec3>,
+) -> (DMat3, DVec3) {
+    for _ in 0..rounds {
+        dst.clear();
+        for p in pts {
+            let x = mo.0 * *p + mo.1;
+            dst.push(
+                grid.nearest(x.as_vec3())
+                    .map_or(x, |(j, _)| cloud(j as usize)),
+            );
+        }
+        match kabsch_trimmed(pts, dst, keep) {
+            Some(f) => mo = f,
+            None => break,
+        }
+    }
+    mo
+}
+
+/// Mean of the `keep` fraction of smallest values of `buf` (reordered); `buf` must
+/// not be empty.
+pub fn trimmed_mean(buf: &mut [f64], keep: f64) -> f64 {
+    let kept = ((buf.len() as f64 * keep).ceil() as usize).clamp(1, buf.len());
+    buf.select_nth_unstable_by(kept - 1, |a, b| a.total_cmp(b));
+    buf[..kept].iter().sum::<f64>() / kept as f64
 }
 
 /// Trimmed Kabsch: re-fits on the `keep` fraction of pairs with the smallest
@@ -251,22 +290,16 @@ pub fn refine_poses(data: &Data, params: &mut Params, opts: &PoseInitOpts) {
             // Relative pose frame 0 → t of Gaussian i: T_i^t (T_i^0)⁻¹.
             let (r0, c0) = relative_motion(&g0[i], &gt[i]);
             let base = score(r0, c0, t, &groups[i], &mut res);
-            let (mut r, mut c) = (r0, c0);
-            for _ in 0..opts.icp {
-                dst.clear();
-                for p in &groups[i] {
-                    let x = r * *p + c;
-                    let q = data.grids[t]
-                        .nearest(x.as_vec3())
-                        .map(|(j, _)| data.frames[t][j as usize])
-                        .unwrap_or(x);
-                    dst.push(q);
-                }
-                match kabsch_trimmed(&groups[i], &dst, opts.keep) {
-                    Some(fit) => (r, c) = fit,
-                    None => break,
-                }
-            }
+            let frame = &data.frames[t];
+            let (r, c) = trimmed_icp(
+                &data.grids[t],
+                |j| frame[j],
+                &groups[i],
+                (r0, c0),
+                opts.icp,
+                opts.keep,
+                &mut dst,
+            );
             if score(r, c, t, &groups[i], &mut res) < base {
                 set_relative_pose(params, t, i, &g0[i], (r, c));
             }

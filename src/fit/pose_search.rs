@@ -33,7 +33,9 @@ use crate::Result;
 
 use super::fitter::Data;
 use super::gaussians::{Gauss, Params};
-use super::pose_init::{frame0_groups, kabsch_trimmed, relative_motion, set_relative_pose};
+use super::pose_init::{
+    frame0_groups, relative_motion, set_relative_pose, trimmed_icp, trimmed_mean,
+};
 
 /// Options of the pose search.
 #[derive(Debug, Clone, Copy)]
@@ -204,30 +206,13 @@ pub fn score(tg: &Target, pts: &[DVec3], mo: Motion, keep: f64, buf: &mut Vec<f6
     if buf.is_empty() {
         return f64::INFINITY;
     }
-    let kept = ((buf.len() as f64 * keep).ceil() as usize).clamp(1, buf.len());
-    buf.select_nth_unstable_by(kept - 1, |a, b| a.total_cmp(b));
-    buf[..kept].iter().sum::<f64>() / kept as f64
+    trimmed_mean(buf, keep)
 }
 
 /// Trimmed ICP of `pts` to the target from `mo`.
-fn icp(tg: &Target, pts: &[DVec3], mut mo: Motion, rounds: usize, keep: f64) -> Motion {
+fn icp(tg: &Target, pts: &[DVec3], mo: Motion, rounds: usize, keep: f64) -> Motion {
     let mut dst = Vec::with_capacity(pts.len());
-    for _ in 0..rounds {
-        dst.clear();
-        for p in pts {
-            let x = mo.0 * *p + mo.1;
-            let q = tg
-                .grid
-                .nearest(x.as_vec3())
-                .map_or(x, |(j, _)| tg.pts[j as usize]);
-            dst.push(q);
-        }
-        match kabsch_trimmed(pts, &dst, keep) {
-            Some(f) => mo = f,
-            None => break,
-        }
-    }
-    mo
+    trimmed_icp(&tg.grid, |j| tg.pts[j], pts, mo, rounds, keep, &mut dst)
 }
 
 /// Frame-0 contact graph of the Gaussians: `w[i][j]` counts subsampled points of

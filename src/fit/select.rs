@@ -236,8 +236,14 @@ pub fn candidate_result(
 /// end to end): the lowest-Chamfer rule picks the same m from the thinned list on six of
 /// the seven robots (talos 13 → 14: RI 0.880 → 0.851, TED 3 → 5), so the means go RI
 /// 0.893 → 0.889, TED 2.57 → 2.86, recon 1.075 → 1.062.
-pub fn candidate_parts(lo: usize, hi: usize, quality: Quality) -> Vec<usize> {
-    match quality {
+/// An empty range or one starting at 0 is an error.
+pub fn candidate_parts(lo: usize, hi: usize, quality: Quality) -> Result<Vec<usize>> {
+    if lo == 0 || lo > hi {
+        return Err(Error::InvalidArgument(format!(
+            "part range {lo}..={hi} is empty or starts at 0"
+        )));
+    }
+    Ok(match quality {
         Quality::Fast => {
             let mut ms: Vec<usize> = (lo..=hi).step_by(2).collect();
             if ms.last() != Some(&hi) {
@@ -246,18 +252,13 @@ pub fn candidate_parts(lo: usize, hi: usize, quality: Quality) -> Vec<usize> {
             ms
         }
         Quality::Balanced | Quality::Paper => (lo..=hi).collect(),
-    }
+    })
 }
 
 /// Candidate list from the options (or the data).
 pub fn candidates(seq: &Sequence, opts: &FitOptions) -> Result<Vec<usize>> {
     let (lo, hi) = opts.parts.unwrap_or_else(|| default_part_range(seq));
-    if lo == 0 || lo > hi {
-        return Err(Error::InvalidArgument(format!(
-            "part range {lo}..={hi} is empty or starts at 0"
-        )));
-    }
-    Ok(candidate_parts(lo, hi, opts.quality))
+    candidate_parts(lo, hi, opts.quality)
 }
 
 /// Model selection: every candidate m, keeping the lowest final Chamfer (ties: smaller m).
@@ -393,16 +394,19 @@ mod size_rule_tests {
 
     #[test]
     fn fast_tries_every_other_part_count_and_the_last() {
-        assert_eq!(candidate_parts(10, 15, Quality::Fast), vec![10, 12, 14, 15]);
-        assert_eq!(candidate_parts(3, 7, Quality::Fast), vec![3, 5, 7]);
-        assert_eq!(candidate_parts(2, 3, Quality::Fast), vec![2, 3]);
-        assert_eq!(candidate_parts(5, 5, Quality::Fast), vec![5]);
         assert_eq!(
-            candidate_parts(10, 15, Quality::Balanced),
+            candidate_parts(10, 15, Quality::Fast).unwrap(),
+            vec![10, 12, 14, 15]
+        );
+        assert_eq!(candidate_parts(3, 7, Quality::Fast).unwrap(), vec![3, 5, 7]);
+        assert_eq!(candidate_parts(2, 3, Quality::Fast).unwrap(), vec![2, 3]);
+        assert_eq!(candidate_parts(5, 5, Quality::Fast).unwrap(), vec![5]);
+        assert_eq!(
+            candidate_parts(10, 15, Quality::Balanced).unwrap(),
             (10..=15).collect::<Vec<_>>()
         );
         assert_eq!(
-            candidate_parts(3, 7, Quality::Paper),
+            candidate_parts(3, 7, Quality::Paper).unwrap(),
             (3..=7).collect::<Vec<_>>()
         );
     }

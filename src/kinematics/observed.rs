@@ -11,9 +11,9 @@
 //! motion (a denoised version of it, as on panda_gripper's slides) and the observed
 //! motion elsewhere; the joints and the root motion stay the model's.
 
-use glam::{DMat4, DVec3, Vec3};
+use glam::{DMat3, DMat4, DVec3, Vec3};
 
-use crate::fit::pose_init::{kabsch, kabsch_trimmed};
+use crate::fit::pose_init::{kabsch, trimmed_icp, trimmed_mean};
 use crate::geom::knn::Grid;
 use crate::geom::se3::{from_row_major, rigid, rigid_inverse, to_row_major};
 use crate::io::result::FitResult;
@@ -208,21 +208,17 @@ pub fn polish_motions(
                 continue;
             }
             let start = *pose;
-            let mut mo = start;
-            for _ in 0..rounds {
-                dst.clear();
-                for x in pts {
-                    let y = mo.transform_point3(*x);
-                    dst.push(
-                        grid.nearest(y.as_vec3())
-                            .map_or(y, |(j, _)| cloud[j as usize].as_dvec3()),
-                    );
-                }
-                match kabsch_trimmed(pts, &dst, keep) {
-                    Some((r, tr)) => mo = rigid(r, tr),
-                    None => break,
-                }
-            }
+            let from = (DMat3::from_mat4(start), start.w_axis.truncate());
+            let (r, tr) = trimmed_icp(
+                &grid,
+                |j| cloud[j].as_dvec3(),
+                pts,
+                from,
+                rounds,
+                keep,
+                &mut dst,
+            );
+            let mo = rigid(r, tr);
             let before = trimmed_fit(&grid, pts, &start, keep, &mut buf);
             if trimmed_fit(&grid, pts, &mo, keep, &mut buf) < (1.0 - gain) * before {
                 *pose = mo;
@@ -244,18 +240,17 @@ fn points_by_part(points: &[Vec3], labels: &[u32], parts: usize) -> Vec<Vec<DVec
 
 /// Mean of the `keep` fraction of smallest squared distances from the moved points to
 /// the cloud.
-fn trimmed_fit(grid: &Grid, pts: &[DVec3], mo: &DMat4, keep: f64, buf: &mut Vec<f32>) -> f64 {
+fn trimmed_fit(grid: &Grid, pts: &[DVec3], mo: &DMat4, keep: f64, buf: &mut Vec<f64>) -> f64 {
     buf.clear();
     buf.extend(
-        pts.iter()
-            .map(|x| grid.nearest_d2_capped(mo.transform_point3(*x).as_vec3(), f32::INFINITY)),
+        pts.iter().map(|x| {
+            grid.nearest_d2_capped(mo.transform_point3(*x).as_vec3(), f32::INFINITY) as f64
+        }),
     );
-    let kept = ((buf.len() as f64 * keep).ceil() as usize).clamp(1, buf.len().max(1));
     if buf.is_empty() {
         return 0.0;
     }
-    buf.select_nth_unstable_by(kept - 1, |a, b| a.total_cmp(b));
-    buf[..kept].iter().map(|&v| v as f64).sum::<f64>() / kept as f64
+    trimmed_mean(buf, keep)
 }
 
 /// Relative improvement of the trimmed fit a polished pose needs. Measured (fast,

@@ -172,17 +172,9 @@ pub fn default_part_range(frames: Array, names: Array) -> Result<Vec<u32>, JsErr
 #[wasm_bindgen]
 pub fn candidate_parts(lo: u32, hi: u32, options: JsValue) -> Result<Vec<u32>, JsError> {
     let opts = options_from_js(options)?;
-    if lo == 0 || lo > hi {
-        return Err(JsError::new(&format!(
-            "part range {lo}..{hi} is empty or starts at 0"
-        )));
-    }
-    Ok(
-        crate::fit::select::candidate_parts(lo as usize, hi as usize, opts.quality)
-            .into_iter()
-            .map(|m| m as u32)
-            .collect(),
-    )
+    let ms = crate::fit::select::candidate_parts(lo as usize, hi as usize, opts.quality)
+        .map_err(js_err)?;
+    Ok(ms.into_iter().map(|m| m as u32).collect())
 }
 
 /// The working clouds the fit sees (frames above the working size downsampled, as
