@@ -10,6 +10,14 @@
 
 use glam::Vec3;
 
+/// A query whose search radius (the cap, or the distance found in its own cell) is
+/// at most this many cells scans just the cells of the box of that radius (≤ 5 per
+/// axis, rows beyond the best distance skipped) instead of growing shells: a
+/// capped query far from the surface otherwise visits every cell of the shells up
+/// to the cap (125 for a cap of one to two cells). Measured on bench-dev frames:
+/// the pose search's coarse scores ~1.6× faster, identical answers.
+const BOX_REACH: f32 = 2.0;
+
 /// Uniform grid over the bounding box of a point set.
 #[derive(Debug, Clone, Default)]
 pub struct Grid {
@@ -147,6 +155,16 @@ impl Grid {
             return None;
         }
         let c0 = self.coords(q);
+        let mut best = (u32::MAX, f32::INFINITY);
+        // Home cell first: a query on the surface usually finds a point closer than
+        // a cell there, and then only the cells within that distance can hold a
+        // closer one (at most 2 per axis instead of the 27 of the first shell).
+        let home = (c0[2] * self.dims[1] + c0[1]) * self.dims[0] + c0[0];
+        self.visit_run(home, home, q, &mut best);
+        if best.1 <= BOX_REACH * BOX_REACH * self.cell * self.cell {
+            self.visit_box(q, best.1.sqrt(), &mut best);
+            return Some(best);
+        }
         // Distances to the faces of the home cell, measured from q clamped into the
         // box: for points in the box this lower-bounds the distance from q itself.
         let qc = q.clamp(self.min, self.max);
@@ -156,14 +174,11 @@ impl Grid {
             dmin = dmin.min(qc[a] - lo).min(lo + self.cell - qc[a]);
         }
         let dmin = dmin.max(0.0);
-        let mut best = (u32::MAX, f32::INFINITY);
         let maxr = self.dims[0].max(self.dims[1]).max(self.dims[2]);
-        for r in 0..=maxr {
-            if r > 0 {
-                let bound = (r - 1) as f32 * self.cell + dmin;
-                if best.1 <= bound * bound {
-                    break;
-                }
+        for r in 1..=maxr {
+            let bound = (r - 1) as f32 * self.cell + dmin;
+            if best.1 <= bound * bound {
+                break;
             }
             self.visit_shell(c0, r, q, &mut best);
         }
@@ -182,25 +197,59 @@ impl Grid {
         if q.distance_squared(qc) >= cap2 {
             return cap2;
         }
+        let mut best = (u32::MAX, cap2);
+        // Home cell first, then only the cells within the cap or the distance found
+        // there, whichever is smaller (see `BOX_REACH`).
         let c0 = self.coords(q);
+        let home = (c0[2] * self.dims[1] + c0[1]) * self.dims[0] + c0[0];
+        self.visit_run(home, home, q, &mut best);
+        if best.1 <= BOX_REACH * BOX_REACH * self.cell * self.cell {
+            self.visit_box(q, best.1.sqrt(), &mut best);
+            return best.1;
+        }
         let mut dmin = f32::INFINITY;
         for a in 0..3 {
             let lo = self.min[a] + c0[a] as f32 * self.cell;
             dmin = dmin.min(qc[a] - lo).min(lo + self.cell - qc[a]);
         }
         let dmin = dmin.max(0.0);
-        let mut best = (u32::MAX, cap2);
         let maxr = self.dims[0].max(self.dims[1]).max(self.dims[2]);
-        for r in 0..=maxr {
-            if r > 0 {
-                let bound = (r - 1) as f32 * self.cell + dmin;
-                if best.1 <= bound * bound {
-                    break;
-                }
+        for r in 1..=maxr {
+            let bound = (r - 1) as f32 * self.cell + dmin;
+            if best.1 <= bound * bound {
+                break;
             }
             self.visit_shell(c0, r, q, &mut best);
         }
         best.1
+    }
+
+    /// Scans the cells meeting the box of half-width `r` around `q` (r at most
+    /// `BOX_REACH` cells), skipping x-rows whose slab lies farther than the best
+    /// distance so far.
+    #[inline]
+    fn visit_box(&self, q: Vec3, r: f32, best: &mut (u32, f32)) {
+        // Padded so rounding in the cell arithmetic never drops a cell or a row
+        // that holds a point within `r`.
+        let r = r * 1.001 + 1e-7 * self.cell;
+        let lo = self.coords(q - Vec3::splat(r));
+        let hi = self.coords(q + Vec3::splat(r));
+        // Squared distance from a coordinate to cell i's slab along axis a.
+        let gap = |a: usize, i: usize| {
+            let s = self.min[a] + i as f32 * self.cell;
+            let d = (s - q[a]).max(q[a] - s - self.cell).max(0.0);
+            d * d
+        };
+        for z in lo[2]..=hi[2] {
+            let gz = gap(2, z);
+            for y in lo[1]..=hi[1] {
+                if gz + gap(1, y) > best.1 * 1.001 {
+                    continue;
+                }
+                let row = (z * self.dims[1] + y) * self.dims[0];
+                self.visit_run(row + lo[0], row + hi[0], q, best);
+            }
+        }
     }
 
     /// Scans the cells `a..=b` of one x-row, whose points are contiguous: one loop
@@ -285,6 +334,43 @@ mod tests {
             let cap = 0.01;
             let want = brute(&pts, q).min(cap);
             assert_eq!(g.nearest_d2_capped(q, cap), want, "{q:?}");
+        }
+    }
+
+    #[test]
+    fn near_surface_queries_match_brute_force() {
+        // Queries just off the points (the common case: the box paths) and caps
+        // below and above the cell size.
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        let pts: Vec<Vec3> = (0..3000)
+            .map(|_| {
+                let v = Vec3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                );
+                v.normalize_or_zero() * 0.5
+            })
+            .collect();
+        let g = Grid::new(&pts);
+        for k in 0..3000 {
+            let p = pts[k % pts.len()];
+            let s = [0.05, 0.3, 1.0, 2.5][k % 4] * g.cell;
+            let q = p + s * Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            );
+            let want = brute(&pts, q);
+            let (i, d) = g.nearest(q).unwrap();
+            assert_eq!(d, want, "{q:?}");
+            assert_eq!(pts[i as usize].distance_squared(q), d);
+            let cap = ([0.1, 0.9, 1.9, 2.6][k / 4 % 4] * g.cell).powi(2);
+            assert_eq!(
+                g.nearest_d2_capped(q, cap),
+                want.min(cap),
+                "{q:?} cap {cap}"
+            );
         }
     }
 
