@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 /// Occlusion handling (partial / occluded input losses of the supplement).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
 #[serde(rename_all = "lowercase")]
 pub enum Occlusion {
     #[default]
@@ -15,7 +15,7 @@ pub enum Occlusion {
 }
 
 /// Quality dial: iteration schedule presets.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
 #[serde(rename_all = "lowercase")]
 pub enum Quality {
     Fast,
@@ -108,6 +108,19 @@ pub fn fit_step1_single(
     cb: &mut dyn FnMut(&Progress) -> Control,
 ) -> crate::Result<crate::fit::Step1Result> {
     let prep = crate::fit::select::prepare(seq, opts)?;
+    crate::fit::select::run_candidate(&prep, m, opts, cb)
+}
+
+/// `fit_step1_single` with the prepared inputs kept in `cache` for the next
+/// candidate of the same sequence (a page worker fits several in turn).
+pub fn fit_step1_cached(
+    cache: &mut crate::fit::select::PrepareCache,
+    seq: &crate::io::sequence::Sequence,
+    m: usize,
+    opts: &FitOptions,
+    cb: &mut dyn FnMut(&Progress) -> Control,
+) -> crate::Result<crate::fit::Step1Result> {
+    let prep = cache.get(seq, opts)?;
     crate::fit::select::run_candidate(&prep, m, opts, cb)
 }
 

@@ -110,6 +110,7 @@ impl FitConfig {
             rounds: sched.reseg_rounds,
             ..Default::default()
         };
+        let later_rotations = sched.later_rotations;
         FitConfig {
             sched,
             occlusion,
@@ -119,7 +120,10 @@ impl FitConfig {
             track_init: false,
             track_iters: 100,
             pose_init: Some(PoseInitOpts::default()),
-            pose_search: Some(PoseSearchOpts::default()),
+            pose_search: Some(PoseSearchOpts {
+                later_rotations,
+                ..Default::default()
+            }),
             motion_seg: Some(motion_seg),
             report_every: 10,
             snapshot_every: 50,
@@ -667,7 +671,15 @@ pub fn fit_candidate(
                     Control::Continue => Ok(()),
                 }
             };
-            pose_search::search_poses(data, &mut params, o, &mut tick)?;
+            let o = PoseSearchOpts {
+                rotations: if round > 0 {
+                    o.later_rotations
+                } else {
+                    o.rotations
+                },
+                ..*o
+            };
+            pose_search::search_poses(data, &mut params, &o, &mut tick)?;
         }
     }
     adam.reset();

@@ -44,6 +44,9 @@ pub struct PoseSearchOpts {
     pub points: usize,
     /// Rotations sampled uniformly on SO(3) (super-Fibonacci spiral).
     pub rotations: usize,
+    /// Rotations in the searches that follow a motion re-segmentation (the poses
+    /// are then mostly right; see `Schedule::later_rotations`).
+    pub later_rotations: usize,
     /// Points per Gaussian used for the coarse score of every candidate.
     pub probe: usize,
     /// Best coarse candidates refined by ICP.
@@ -95,6 +98,7 @@ impl Default for PoseSearchOpts {
         PoseSearchOpts {
             points: 1024,
             rotations: 2048,
+            later_rotations: 2048,
             probe: 48,
             top: 12,
             icp: 6,

@@ -31,6 +31,20 @@ pub struct Schedule {
     /// 2.14, re-animation 3.20 / 2.92, RI 0.887 / 0.892. A round costs about a third
     /// of the search.
     pub reseg_rounds: usize,
+    /// Rotations tried per Gaussian and frame by the pose searches after a
+    /// re-segmentation (the first search tries 2048). Measured (bench-dev full, Fast,
+    /// default selection; mean RI / recon / flow / TED / re-animation, s per
+    /// sequence natively): 2048: 0.889 / 1.06 / 1.21 / 2.86 / 3.07, 13.1 s; 1024:
+    /// 0.876 / 1.01 / 1.03 / 2.14 / 2.30, 10.9 s; 512: 0.857 / 1.06 / 1.18 / 3.14 /
+    /// 2.83, 10.2 s.
+    pub later_rotations: usize,
+    /// Divides `iters` when the global pose search ran: the main loop then only
+    /// polishes. Measured (bench-dev full, Step-1 poses, true part count, Fast):
+    /// 300 iterations recon / flow / RI 1.67 / 1.70 / 0.798 vs 1.65 / 1.66 / 0.796
+    /// with 1200; Fast end to end (with 1024 later rotations) 100 instead of 300
+    /// iterations: 0.874 / 1.02 / 1.01 / 2.00 / 2.32 vs 0.876 / 1.01 / 1.03 / 2.14 /
+    /// 2.30, 9.8 instead of 10.9 s per sequence.
+    pub searched_divisor: usize,
 }
 
 impl Schedule {
@@ -51,7 +65,13 @@ impl Schedule {
             Quality::Fast => 2,
             Quality::Balanced | Quality::Paper => 3,
         };
+        let (later_rotations, searched_divisor) = match q {
+            Quality::Fast => (1024, 12),
+            Quality::Balanced | Quality::Paper => (2048, 4),
+        };
         Schedule {
+            later_rotations,
+            searched_divisor,
             iters,
             emd_start,
             warmup: 200,

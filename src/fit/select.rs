@@ -147,18 +147,59 @@ pub fn prepare(seq: &Sequence, opts: &FitOptions) -> Result<Prepared> {
     })
 }
 
+/// The last `Prepared` of a worker, reused while the sequence and the options that
+/// shape it stay the same: a page worker fits several candidates of one sequence in
+/// turn, and preparing (working clouds, grids, scene flow) took ~0.3 s per
+/// candidate in wasm.
+#[derive(Default)]
+pub struct PrepareCache {
+    last: Option<(u64, std::rc::Rc<Prepared>)>,
+}
+
+impl PrepareCache {
+    /// The prepared inputs for `seq` and `opts`, computed only when they differ from
+    /// the last call's (by a hash of every point, the frame names and the options
+    /// `prepare` reads; the part range does not matter).
+    pub fn get(&mut self, seq: &Sequence, opts: &FitOptions) -> Result<std::rc::Rc<Prepared>> {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        for f in &seq.frames {
+            f.name.hash(&mut h);
+            f.points.len().hash(&mut h);
+            for p in &f.points {
+                for v in p.to_array() {
+                    v.to_bits().hash(&mut h);
+                }
+            }
+        }
+        (
+            opts.quality,
+            opts.iters,
+            opts.occlusion,
+            opts.seed,
+            opts.working_size,
+        )
+            .hash(&mut h);
+        let key = h.finish();
+        if let Some((k, prep)) = &self.last {
+            if *k == key {
+                return Ok(prep.clone());
+            }
+        }
+        // Drop the old one first: only one sequence is kept.
+        self.last = None;
+        let prep = std::rc::Rc::new(prepare(seq, opts)?);
+        self.last = Some((key, prep.clone()));
+        Ok(prep)
+    }
+}
+
 /// The global pose search (`fit::pose_search`) runs only when every working frame
 /// has at least this many points: on sparse frames its groups are too small to be
 /// told apart. Measured (Fast, end to end): procedural laptop 4 × 512 mean RI 0.505 /
 /// reconstruction 9.56 with the search vs 0.725 / 1.42 without; 10 × 2048: 0.97 /
 /// 1.43 with vs 0.84 / 1.70 without.
 pub const SEARCH_MIN_POINTS: usize = 1024;
-
-/// Divides the preset's main-loop iterations when the pose search ran. Measured
-/// (Fast, true part count, bench-dev full, Step-1 poses): 300 iterations mean
-/// recon / flow / RI 1.67 / 1.70 / 0.798 vs 1.65 / 1.66 / 0.796 with 1200, in
-/// 52 s instead of 77 s for the seven sequences.
-pub const MAIN_ITERS_DIVISOR: usize = 4;
 
 /// Runs one candidate m on prepared data.
 pub fn run_candidate(
@@ -173,8 +214,8 @@ pub fn run_candidate(
         cfg.pose_search = None;
         cfg.motion_seg = None;
     }
-    // After the global search the main loop only polishes: a quarter of the
-    // preset's iterations (unless the caller set a count).
+    // After the global search the main loop only polishes: a fraction of the
+    // preset's iterations (`Schedule::searched_divisor`; unless the caller set a count).
     let searched = cfg
         .pose_search
         .as_ref()
@@ -183,7 +224,7 @@ pub fn run_candidate(
         cfg.sched = cfg
             .sched
             .clone()
-            .with_iters((cfg.sched.iters / MAIN_ITERS_DIVISOR).max(100));
+            .with_iters((cfg.sched.iters / cfg.sched.searched_divisor).max(100));
     }
     #[cfg(not(target_arch = "wasm32"))]
     let t0 = std::time::Instant::now();
@@ -409,6 +450,46 @@ mod size_rule_tests {
             candidate_parts(3, 7, Quality::Paper).unwrap(),
             (3..=7).collect::<Vec<_>>()
         );
+    }
+
+    #[test]
+    fn prepare_cache_reuses_only_the_same_sequence_and_options() {
+        let mk = |shift: f32| Sequence {
+            frames: (0..3)
+                .map(|k| Frame {
+                    name: format!("{k}.ply"),
+                    points: (0..200)
+                        .map(|i| {
+                            let a = i as f32 * 0.1 + k as f32 * 0.05;
+                            glam::Vec3::new(a.cos(), a.sin(), i as f32 * 0.01 + shift)
+                        })
+                        .collect(),
+                    ..Default::default()
+                })
+                .collect(),
+        };
+        let opts = FitOptions::default();
+        let mut cache = PrepareCache::default();
+        let a = cache.get(&mk(0.0), &opts).unwrap();
+        let b = cache.get(&mk(0.0), &opts).unwrap();
+        assert!(std::rc::Rc::ptr_eq(&a, &b));
+        // Another part range: same preparation.
+        let ranged = FitOptions {
+            parts: Some((2, 3)),
+            ..opts.clone()
+        };
+        assert!(std::rc::Rc::ptr_eq(
+            &a,
+            &cache.get(&mk(0.0), &ranged).unwrap()
+        ));
+        // Moved points or another seed: prepared again.
+        let c = cache.get(&mk(1e-3), &opts).unwrap();
+        assert!(!std::rc::Rc::ptr_eq(&a, &c));
+        let seeded = FitOptions { seed: 7, ..opts };
+        assert!(!std::rc::Rc::ptr_eq(
+            &c,
+            &cache.get(&mk(1e-3), &seeded).unwrap()
+        ));
     }
 
     #[test]

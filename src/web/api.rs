@@ -157,6 +157,8 @@ thread_local! {
     /// Step-1 candidates fitted by this worker, kept so the worker holding the best one
     /// can go on with Steps 2–3 without sending the model across workers.
     static CANDIDATES: RefCell<Vec<Step1Result>> = const { RefCell::new(Vec::new()) };
+    /// The prepared inputs of the sequence this worker fits, for its next candidate.
+    static PREPARED: RefCell<crate::fit::select::PrepareCache> = RefCell::default();
 }
 
 /// The core's default part-count range for these frames: `[lo, hi]`.
@@ -205,7 +207,12 @@ pub fn fit_candidate(
     let seq = sequence_from_js(&frames, &names)?;
     let opts = options_from_js(options)?;
     let mut throttle = Throttle::new(on_progress);
-    let r = crate::pipeline::fit_step1_single(&seq, m, &opts, &mut |p| throttle.report(p))
+    let r = PREPARED
+        .with(|c| {
+            crate::pipeline::fit_step1_cached(&mut c.borrow_mut(), &seq, m, &opts, &mut |p| {
+                throttle.report(p)
+            })
+        })
         .map_err(js_err)?;
     let o = Object::new();
     set(&o, "m", &JsValue::from_f64(m as f64));
