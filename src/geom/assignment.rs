@@ -241,6 +241,22 @@ mod tests {
             assert!(lap.solve(&wide, n, n + 1, &mut b));
             assert_eq!(a, b, "n = {n}");
         }
+        // Many ties (small integer costs): several optima, the same optimal total.
+        for n in [5usize, 30, 90] {
+            let square: Vec<f64> = (0..n * n).map(|_| rng.random_range(0..4) as f64).collect();
+            let wide: Vec<f64> = (0..n)
+                .flat_map(|i| square[i * n..(i + 1) * n].iter().copied().chain([1e9]))
+                .collect();
+            assert!(lap.solve(&square, n, n, &mut a));
+            assert!(lap.solve(&wide, n, n + 1, &mut b));
+            let total = |c: &[f64], w: usize, x: &[usize]| -> f64 {
+                x.iter().enumerate().map(|(i, &j)| c[i * w + j]).sum()
+            };
+            let mut seen = vec![false; n];
+            a.iter().for_each(|&j| seen[j] = true);
+            assert!(seen.iter().all(|s| *s), "a permutation");
+            assert_eq!(total(&square, n, &a), total(&wide, n + 1, &b), "n = {n}");
+        }
     }
 
     #[test]
