@@ -43,8 +43,9 @@ mod cli {
             #[arg(long)]
             iters: Option<usize>,
             /// Quality preset: fast (every other part count of the range, two motion
-            /// re-segmentation rounds), balanced (every part count, three rounds) or
-            /// paper (the paper's iteration counts).
+            /// re-segmentation rounds with a lighter pose search after them, a short
+            /// polish), balanced (every part count, three rounds) or paper (the paper's
+            /// iteration counts).
             #[arg(long, default_value = "balanced")]
             quality: String,
             /// Occlusion handling: auto, on or off.
