@@ -165,23 +165,7 @@ impl Grid {
             self.visit_box(q, best.1.sqrt(), &mut best);
             return Some(best);
         }
-        // Distances to the faces of the home cell, measured from q clamped into the
-        // box: for points in the box this lower-bounds the distance from q itself.
-        let qc = q.clamp(self.min, self.max);
-        let mut dmin = f32::INFINITY;
-        for a in 0..3 {
-            let lo = self.min[a] + c0[a] as f32 * self.cell;
-            dmin = dmin.min(qc[a] - lo).min(lo + self.cell - qc[a]);
-        }
-        let dmin = dmin.max(0.0);
-        let maxr = self.dims[0].max(self.dims[1]).max(self.dims[2]);
-        for r in 1..=maxr {
-            let bound = (r - 1) as f32 * self.cell + dmin;
-            if best.1 <= bound * bound {
-                break;
-            }
-            self.visit_shell(c0, r, q, &mut best);
-        }
+        self.visit_shells(c0, q, &mut best);
         Some(best)
     }
 
@@ -207,6 +191,18 @@ impl Grid {
             self.visit_box(q, best.1.sqrt(), &mut best);
             return best.1;
         }
+        self.visit_shells(c0, q, &mut best);
+        best.1
+    }
+
+    /// Grows shells from the first ring around the home cell (already visited) until
+    /// no closer point can lie outside them; once the best distance is within
+    /// `BOX_REACH` cells (typically after the first ring, when the own cell was
+    /// empty), the box of that radius finishes the search instead of a whole shell.
+    fn visit_shells(&self, c0: [usize; 3], q: Vec3, best: &mut (u32, f32)) {
+        // Distance to the faces of the home cell, measured from q clamped into the
+        // box: for points in the box this lower-bounds the distance from q itself.
+        let qc = q.clamp(self.min, self.max);
         let mut dmin = f32::INFINITY;
         for a in 0..3 {
             let lo = self.min[a] + c0[a] as f32 * self.cell;
@@ -219,9 +215,12 @@ impl Grid {
             if best.1 <= bound * bound {
                 break;
             }
-            self.visit_shell(c0, r, q, &mut best);
+            if r > 1 && best.1 <= BOX_REACH * BOX_REACH * self.cell * self.cell {
+                self.visit_box(q, best.1.sqrt(), best);
+                break;
+            }
+            self.visit_shell(c0, r, q, best);
         }
-        best.1
     }
 
     /// Scans the cells meeting the box of half-width `r` around `q` (r at most
