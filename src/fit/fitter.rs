@@ -110,7 +110,6 @@ impl FitConfig {
             rounds: sched.reseg_rounds,
             ..Default::default()
         };
-        let later_rotations = sched.later_rotations;
         FitConfig {
             sched,
             occlusion,
@@ -120,10 +119,7 @@ impl FitConfig {
             track_init: false,
             track_iters: 100,
             pose_init: Some(PoseInitOpts::default()),
-            pose_search: Some(PoseSearchOpts {
-                later_rotations,
-                ..Default::default()
-            }),
+            pose_search: Some(PoseSearchOpts::default()),
             motion_seg: Some(motion_seg),
             report_every: 10,
             snapshot_every: 50,
@@ -673,7 +669,7 @@ pub fn fit_candidate(
             };
             let o = PoseSearchOpts {
                 rotations: if round > 0 {
-                    o.later_rotations
+                    sched.later_rotations
                 } else {
                     o.rotations
                 },

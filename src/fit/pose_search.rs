@@ -42,11 +42,9 @@ use super::pose_init::{
 pub struct PoseSearchOpts {
     /// Frame-0 points used (subsample of the working cloud).
     pub points: usize,
-    /// Rotations sampled uniformly on SO(3) (super-Fibonacci spiral).
+    /// Rotations sampled uniformly on SO(3) (super-Fibonacci spiral). The fitter
+    /// uses `Schedule::later_rotations` instead after a motion re-segmentation.
     pub rotations: usize,
-    /// Rotations in the searches that follow a motion re-segmentation (the poses
-    /// are then mostly right; see `Schedule::later_rotations`).
-    pub later_rotations: usize,
     /// Points per Gaussian used for the coarse score of every candidate.
     pub probe: usize,
     /// Best coarse candidates refined by ICP.
@@ -98,7 +96,6 @@ impl Default for PoseSearchOpts {
         PoseSearchOpts {
             points: 1024,
             rotations: 2048,
-            later_rotations: 2048,
             probe: 48,
             top: 12,
             icp: 6,
