@@ -17,6 +17,7 @@ use super::pose_init::{self, PoseInitOpts};
 use super::pose_search::{self, PoseSearchOpts};
 use super::schedule::Schedule;
 use crate::geom::assignment::Lap;
+use crate::geom::cap_mask::CapMask;
 use crate::geom::knn::Grid;
 use crate::pipeline::{Control, Progress, Stage};
 use crate::{Error, Result};
@@ -27,6 +28,9 @@ pub struct Data {
     pub frames32: Vec<Vec<Vec3>>,
     pub frames: Vec<Vec<DVec3>>,
     pub grids: Vec<Grid>,
+    /// Per frame, the places beyond the pose search's distance cap (built by
+    /// `pose_search` on first use, then shared by its searches and candidates).
+    pub(crate) cap_masks: std::sync::OnceLock<Vec<CapMask>>,
 }
 
 impl Data {
@@ -40,6 +44,7 @@ impl Data {
             frames32,
             frames,
             grids,
+            cap_masks: std::sync::OnceLock::new(),
         }
     }
     pub fn k(&self) -> usize {

@@ -28,6 +28,7 @@
 
 use glam::{DMat3, DQuat, DVec3, Vec3};
 
+use crate::geom::cap_mask::CapMask;
 use crate::geom::knn::Grid;
 use crate::Result;
 
@@ -147,19 +148,24 @@ pub(crate) fn rotation_angle(a: DMat3, b: DMat3) -> f64 {
 
 /// The target cloud of one frame for the search: the frame's points not yet
 /// claimed by an already posed Gaussian (all of them without `exclusive`).
-pub struct Target {
+pub struct Target<'a> {
     pts: Vec<DVec3>,
     grid: Grid,
+    /// Places farther than the cap from all of the frame's points (exact for the
+    /// claimed-down cloud too: removing points only moves them farther).
+    far: &'a CapMask,
     /// Per frame point: still free.
     free: Vec<bool>,
 }
 
-impl Target {
+impl<'a> Target<'a> {
     /// All of frame `t`'s points.
-    pub fn frame(data: &Data, t: usize) -> Self {
+    pub fn frame(data: &'a Data, t: usize) -> Self {
+        let masks = cap_masks(data);
         Target {
             pts: data.frames[t].clone(),
             grid: data.grids[t].clone(),
+            far: &masks[t],
             free: vec![true; data.frames[t].len()],
         }
     }
@@ -194,6 +200,24 @@ impl Target {
         }
         self.grid.rebuild(&p32);
     }
+
+    /// Squared distance from `x` to the nearest free point, capped at `CAP2`.
+    #[inline]
+    fn capped_d2(&self, x: Vec3) -> f64 {
+        if self.far.far(x) {
+            return CAP2;
+        }
+        self.grid.nearest_d2_capped(x, CAP2 as f32) as f64
+    }
+}
+
+/// Per frame, the places farther than the cap from every point (built once per
+/// prepared sequence).
+fn cap_masks(data: &Data) -> &[CapMask] {
+    data.cap_masks.get_or_init(|| {
+        let r = (CAP2 as f32).sqrt();
+        data.frames32.iter().map(|f| CapMask::new(f, r)).collect()
+    })
 }
 
 /// Trimmed mean squared distance (each capped at `CAP2`) from the moved points to
@@ -202,7 +226,7 @@ pub fn score(tg: &Target, pts: &[DVec3], mo: Motion, keep: f64, buf: &mut Vec<f6
     buf.clear();
     for p in pts {
         let x = mo.0 * *p + mo.1;
-        buf.push(tg.grid.nearest_d2_capped(x.as_vec3(), CAP2 as f32) as f64);
+        buf.push(tg.capped_d2(x.as_vec3()));
     }
     if buf.is_empty() {
         return f64::INFINITY;
@@ -533,11 +557,7 @@ fn guard_flip(
 fn claim(tg: &mut Target, data: &Data, t: usize, pts: &[DVec3], mo: Motion, buf: &mut Vec<f64>) {
     let moved: Vec<DVec3> = pts.iter().map(|p| mo.0 * *p + mo.1).collect();
     buf.clear();
-    buf.extend(
-        moved
-            .iter()
-            .map(|x| tg.grid.nearest_d2_capped(x.as_vec3(), CAP2 as f32) as f64),
-    );
+    buf.extend(moved.iter().map(|x| tg.capped_d2(x.as_vec3())));
     if buf.is_empty() {
         return;
     }
@@ -597,7 +617,7 @@ fn search_one(
         let mut sum = 0.0;
         for p in probe {
             let x = c.0 * *p + c.1;
-            sum += tg.grid.nearest_d2_capped(x.as_vec3(), CAP2 as f32) as f64;
+            sum += tg.capped_d2(x.as_vec3());
             if sum >= bound {
                 break;
             }
@@ -652,9 +672,17 @@ fn select_by_coverage(
         for &(r, c) in &pool[j] {
             moved.clear();
             moved.extend(groups[j].iter().map(|p| r * *p + c));
+            let far = &cap_masks(data)[t];
             let f: f64 = moved
                 .iter()
-                .map(|x| data.grids[t].nearest_d2_capped(x.as_vec3(), CAP2 as f32) as f64)
+                .map(|x| {
+                    let x = x.as_vec3();
+                    if far.far(x) {
+                        CAP2
+                    } else {
+                        data.grids[t].nearest_d2_capped(x, CAP2 as f32) as f64
+                    }
+                })
                 .sum();
             fj.push(f);
             // Targets outside the moved group's box grown by the cap are at the cap:

@@ -1,0 +1,201 @@
+//! Cap mask: a bitset over a fine grid that marks the places within a fixed radius of
+//! some point of a cloud, so a capped nearest-neighbour query (`Grid::nearest_d2_capped`)
+//! from anywhere else can return the cap without a search.
+//!
+//! Why: the global pose search scores thousands of candidate poses per Gaussian and
+//! frame by capped distances, and most probe points of a wrong pose land in empty space,
+//! where the grid query still scans the (empty) cells of its cap's box. The mask is exact:
+//! a cell is left unmarked only when no point lies within the radius of any place in it,
+//! so removing points from the cloud later (the search's `claim`) keeps it valid.
+
+use glam::Vec3;
+
+/// Cells per radius along each axis: finer cells mark less empty space near the
+/// surface, at the cost of more bits and more marking per point.
+const CELLS_PER_RADIUS: f32 = 4.0;
+
+/// At most this many cells (bits); coarser cells beyond that (still exact).
+const MAX_CELLS: usize = 1 << 25;
+
+#[derive(Debug, Clone, Default)]
+pub struct CapMask {
+    min: Vec3,
+    inv_cell: f32,
+    dims: [usize; 3],
+    bits: Vec<u64>,
+}
+
+impl CapMask {
+    /// Marks every cell that has a place within `radius` of one of `points`. Empty or
+    /// non-finite input gives a mask that marks everything (no query skipped).
+    pub fn new(points: &[Vec3], radius: f32) -> Self {
+        let finite = points.iter().all(|p| p.is_finite());
+        if points.is_empty() || !finite || !(radius > 0.0 && radius.is_finite()) {
+            return CapMask::default();
+        }
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for p in points {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+        let ext = hi - lo;
+        // A margin for rounding: a place unmarked is farther than `radius` from every
+        // point even after the cell arithmetic's f32 error.
+        let reach = radius * 1.001 + 1e-6 * (ext.max_element() + radius);
+        let min = lo - Vec3::splat(reach);
+        let span = ext + Vec3::splat(2.0 * reach);
+        let mut cell = radius / CELLS_PER_RADIUS;
+        let dims_for = |cell: f32| {
+            [
+                (span.x / cell) as usize + 1,
+                (span.y / cell) as usize + 1,
+                (span.z / cell) as usize + 1,
+            ]
+        };
+        let mut dims = dims_for(cell);
+        while dims[0] * dims[1] * dims[2] > MAX_CELLS {
+            cell *= 1.26;
+            dims = dims_for(cell);
+        }
+        let total = dims[0] * dims[1] * dims[2];
+        let mut mask = CapMask {
+            min,
+            inv_cell: 1.0 / cell,
+            dims,
+            bits: vec![0; total.div_ceil(64)],
+        };
+        let r2 = reach * reach;
+        for p in points {
+            let a = mask.coords(*p - Vec3::splat(reach));
+            let b = mask.coords(*p + Vec3::splat(reach));
+            // Squared distance from p to cell i's slab along an axis.
+            let gap = |axis: usize, i: usize| {
+                let s = min[axis] + i as f32 * cell;
+                let d = (s - p[axis]).max(p[axis] - s - cell).max(0.0);
+                d * d
+            };
+            for z in a[2]..=b[2] {
+                let gz = gap(2, z);
+                for y in a[1]..=b[1] {
+                    let gzy = gz + gap(1, y);
+                    if gzy > r2 {
+                        continue;
+                    }
+                    // The row's cells within reach: those whose x-slab is within w of
+                    // p — one run of bits, set word by word.
+                    let w = (r2 - gzy).sqrt();
+                    let x0 = mask.coords(Vec3::new(p.x - w, p.y, p.z))[0];
+                    let x1 = mask.coords(Vec3::new(p.x + w, p.y, p.z))[0];
+                    let row = (z * dims[1] + y) * dims[0];
+                    mask.set_run(row + x0, row + x1);
+                }
+            }
+        }
+        mask
+    }
+
+    /// Sets bits `a..=b`.
+    fn set_run(&mut self, a: usize, b: usize) {
+        let (wa, wb) = (a / 64, b / 64);
+        let lo = u64::MAX << (a % 64);
+        let hi = u64::MAX >> (63 - b % 64);
+        if wa == wb {
+            self.bits[wa] |= lo & hi;
+        } else {
+            self.bits[wa] |= lo;
+            for w in &mut self.bits[wa + 1..wb] {
+                *w = u64::MAX;
+            }
+            self.bits[wb] |= hi;
+        }
+    }
+
+    #[inline]
+    fn coords(&self, p: Vec3) -> [usize; 3] {
+        let q = (p - self.min) * self.inv_cell;
+        [
+            (q.x.max(0.0) as usize).min(self.dims[0] - 1),
+            (q.y.max(0.0) as usize).min(self.dims[1] - 1),
+            (q.z.max(0.0) as usize).min(self.dims[2] - 1),
+        ]
+    }
+
+    /// Whether `q` is certainly farther than the radius from every point (false when
+    /// unsure, e.g. for a mask of nothing or a non-finite query).
+    #[inline]
+    pub fn far(&self, q: Vec3) -> bool {
+        if self.bits.is_empty() {
+            return false;
+        }
+        let f = (q - self.min) * self.inv_cell;
+        if !f.is_finite() {
+            return false;
+        }
+        if f.cmplt(Vec3::ZERO).any() {
+            return true;
+        }
+        let (x, y, z) = (f.x as usize, f.y as usize, f.z as usize);
+        if x >= self.dims[0] || y >= self.dims[1] || z >= self.dims[2] {
+            return true;
+        }
+        let i = (z * self.dims[1] + y) * self.dims[0] + x;
+        self.bits[i / 64] & (1 << (i % 64)) == 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geom::knn::Grid;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn far_places_are_farther_than_the_radius_and_near_ones_are_kept() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        // A curved surface patch, like a frame of a scan.
+        let pts: Vec<Vec3> = (0..3000)
+            .map(|_| {
+                let (u, v): (f32, f32) = (rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+                Vec3::new(u, v, 0.3 * (u * 2.0).sin() * v)
+            })
+            .collect();
+        let grid = Grid::new(&pts);
+        for radius in [0.01f32, 0.0316, 0.1] {
+            let mask = CapMask::new(&pts, radius);
+            let cap2 = radius * radius;
+            let (mut skipped, mut near_far) = (0, 0);
+            for _ in 0..20_000 {
+                let q = Vec3::new(
+                    rng.random_range(-1.3..1.3),
+                    rng.random_range(-1.3..1.3),
+                    rng.random_range(-0.6..0.6),
+                );
+                let d2 = grid.nearest_d2_capped(q, cap2);
+                if mask.far(q) {
+                    // Exact: the capped query gives the cap there.
+                    assert_eq!(d2, cap2, "radius {radius}, query {q}");
+                    skipped += 1;
+                } else if d2 == cap2 {
+                    near_far += 1;
+                }
+            }
+            // Most places beyond the cap are recognised.
+            assert!(
+                skipped > 5 * near_far,
+                "radius {radius}: {skipped} vs {near_far}"
+            );
+        }
+    }
+
+    #[test]
+    fn empty_or_bad_input_skips_nothing() {
+        let m = CapMask::new(&[], 0.1);
+        assert!(!m.far(Vec3::ZERO));
+        let m = CapMask::new(&[Vec3::new(f32::NAN, 0.0, 0.0)], 0.1);
+        assert!(!m.far(Vec3::ONE));
+        let m = CapMask::new(&[Vec3::ZERO], 0.1);
+        assert!(!m.far(Vec3::splat(0.05)));
+        assert!(m.far(Vec3::splat(0.2)));
+        assert!(!m.far(Vec3::new(f32::NAN, 0.0, 0.0)));
+    }
+}
