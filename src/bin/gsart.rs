@@ -42,7 +42,7 @@ mod cli {
             /// Step-1 iterations per candidate (overrides the quality preset).
             #[arg(long)]
             iters: Option<usize>,
-            /// Quality preset: fast (every other part count of the range, two motion
+            /// Quality preset: fast (the two ends of the part range, two motion
             /// re-segmentation rounds with a lighter pose search after them, a short
             /// polish), balanced (every part count, three rounds) or paper (the paper's
             /// iteration counts).

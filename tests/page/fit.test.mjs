@@ -36,7 +36,7 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   assert.equal(await page.locator('#progress').isVisible(), true);
   // The Gaussians move in the view while Step 1 runs.
   await page.waitForFunction(() => /running|left/.test(document.querySelector('#stage-list').innerText), null, { timeout: 120_000 });
-  // Fast tries every other part count and the last one (the core's rule).
+  // Fast tries the two ends of the range (the core's rule).
   assert.match(await page.locator('#fit-status').innerText(), /m = 2, 4 of 2…4/);
   await page.waitForTimeout(1500);
   const a = await canvasPng(page);

@@ -541,7 +541,7 @@ async function startFit() {
   S.chart.clear('Step 1 loss');
   fitUi(true);
   setStepActive('step-fit');
-  // The core decides which part counts a quality tries (fast: every other one).
+  // The core decides which part counts a quality tries (fast: the two ends of the range).
   const parts = Array.from(wasm.candidate_parts(range[0], range[1], opts));
   const par = Math.min(maxParallel(), parts.length);
   const whole = parts.length === range[1] - range[0] + 1;
