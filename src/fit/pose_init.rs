@@ -128,13 +128,16 @@ pub fn kabsch_trimmed(a: &[DVec3], b: &[DVec3], keep: f64) -> Option<(DMat3, DVe
     let mut fit = kabsch(a, b, &w)?;
     let kept = ((n as f64 * keep.clamp(0.1, 1.0)).ceil() as usize).clamp(3, n);
     let mut res: Vec<f64> = vec![0.0; n];
+    let mut order: Vec<f64> = vec![0.0; n];
     for _ in 0..3 {
         for j in 0..n {
             res[j] = (fit.0 * a[j] + fit.1).distance_squared(b[j]);
         }
-        let mut sorted = res.clone();
-        sorted.sort_by(|x, y| x.total_cmp(y));
-        let thr = sorted[kept - 1];
+        // The kept-th smallest residual (a selection, not a sort: same value).
+        order.copy_from_slice(&res);
+        let thr = *order
+            .select_nth_unstable_by(kept - 1, |x, y| x.total_cmp(y))
+            .1;
         for j in 0..n {
             w[j] = if res[j] <= thr { 1.0 } else { 0.0 };
         }
