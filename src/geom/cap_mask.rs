@@ -10,6 +10,8 @@
 
 use glam::Vec3;
 
+use super::knn::clamped_cell;
+
 /// Cells per radius along each axis: finer cells mark less empty space near the
 /// surface, at the cost of more bits and more marking per point.
 const CELLS_PER_RADIUS: f32 = 4.0;
@@ -112,12 +114,7 @@ impl CapMask {
 
     #[inline]
     fn coords(&self, p: Vec3) -> [usize; 3] {
-        let q = (p - self.min) * self.inv_cell;
-        [
-            (q.x.max(0.0) as usize).min(self.dims[0] - 1),
-            (q.y.max(0.0) as usize).min(self.dims[1] - 1),
-            (q.z.max(0.0) as usize).min(self.dims[2] - 1),
-        ]
+        clamped_cell(p, self.min, self.inv_cell, self.dims)
     }
 
     /// Whether `q` is certainly farther than the radius from every point (false when
