@@ -49,13 +49,16 @@ impl CapMask {
         let mut cell = radius / CELLS_PER_RADIUS;
         let dims_for = |cell: f32| {
             [
-                (span.x / cell) as usize + 1,
-                (span.y / cell) as usize + 1,
-                (span.z / cell) as usize + 1,
+                ((span.x / cell) as usize).saturating_add(1),
+                ((span.y / cell) as usize).saturating_add(1),
+                ((span.z / cell) as usize).saturating_add(1),
             ]
         };
+        // Counted in f64: a cloud far larger than the radius (e.g. millimetre units)
+        // would overflow a 32-bit usize (wasm) before the cells are coarsened.
+        let count = |d: [usize; 3]| d[0] as f64 * d[1] as f64 * d[2] as f64;
         let mut dims = dims_for(cell);
-        while dims[0] * dims[1] * dims[2] > MAX_CELLS {
+        while count(dims) > MAX_CELLS as f64 {
             cell *= 1.26;
             dims = dims_for(cell);
         }
@@ -181,6 +184,33 @@ mod tests {
                 skipped > 5 * near_far,
                 "radius {radius}: {skipped} vs {near_far}"
             );
+        }
+    }
+
+    #[test]
+    fn a_cloud_much_larger_than_the_radius_gets_coarser_cells() {
+        // Millimetre-scale input against the pose search's normalised cap.
+        let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+        let pts: Vec<Vec3> = (0..2000)
+            .map(|_| {
+                Vec3::new(
+                    rng.random_range(-400.0..400.0),
+                    rng.random_range(-300.0..300.0),
+                    rng.random_range(-5.0..5.0),
+                )
+            })
+            .collect();
+        let radius = 0.0316f32;
+        let mask = CapMask::new(&pts, radius);
+        assert!(mask.bits.len() * 64 <= 2 * MAX_CELLS);
+        let grid = Grid::new(&pts);
+        for p in pts.iter().take(200) {
+            // On a point: never far.
+            assert!(!mask.far(*p));
+            let q = *p + Vec3::new(0.0, 0.0, 50.0);
+            if mask.far(q) {
+                assert_eq!(grid.nearest_d2_capped(q, radius * radius), radius * radius);
+            }
         }
     }
 
