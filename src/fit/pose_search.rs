@@ -204,11 +204,18 @@ impl<'a> Target<'a> {
     /// Squared distance from `x` to the nearest free point, capped at `CAP2`.
     #[inline]
     fn capped_d2(&self, x: Vec3) -> f64 {
-        if self.far.far(x) {
-            return CAP2;
-        }
-        self.grid.nearest_d2_capped(x, CAP2 as f32) as f64
+        capped_d2(self.far, &self.grid, x)
     }
+}
+
+/// Squared distance from `x` to the nearest point of `grid`, capped at `CAP2`; `far`
+/// (a mask of the same cloud or a superset) answers places beyond the cap at once.
+#[inline]
+fn capped_d2(far: &CapMask, grid: &Grid, x: Vec3) -> f64 {
+    if far.far(x) {
+        return CAP2;
+    }
+    grid.nearest_d2_capped(x, CAP2 as f32) as f64
 }
 
 /// Per frame, the places farther than the cap from every point (built once per
@@ -666,23 +673,16 @@ fn select_by_coverage(
     let mut fwd: Vec<Vec<f64>> = Vec::with_capacity(m);
     let mut rev: Vec<Vec<Vec<f64>>> = Vec::with_capacity(m);
     let mut moved = Vec::new();
+    let far = &cap_masks(data)[t];
     for j in 0..m {
         let mut fj = Vec::with_capacity(pool[j].len());
         let mut rj = Vec::with_capacity(pool[j].len());
         for &(r, c) in &pool[j] {
             moved.clear();
             moved.extend(groups[j].iter().map(|p| r * *p + c));
-            let far = &cap_masks(data)[t];
             let f: f64 = moved
                 .iter()
-                .map(|x| {
-                    let x = x.as_vec3();
-                    if far.far(x) {
-                        CAP2
-                    } else {
-                        data.grids[t].nearest_d2_capped(x, CAP2 as f32) as f64
-                    }
-                })
+                .map(|x| capped_d2(far, &data.grids[t], x.as_vec3()))
                 .sum();
             fj.push(f);
             // Targets outside the moved group's box grown by the cap are at the cap:
