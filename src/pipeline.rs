@@ -182,6 +182,9 @@ pub fn finish(
         )));
     }
     let canonical = 0;
+    // Steps 2–3 work in fit units like Step 1 (see `normalisation`); the Step-1 model
+    // comes in input units.
+    let norm = crate::normalisation::Normalisation::of(seq);
     let mut points = Vec::with_capacity(k);
     for (f, idx) in seq.frames.iter().zip(&step1.working) {
         let mut w = Vec::with_capacity(idx.len());
@@ -189,13 +192,17 @@ pub fn finish(
             let p = f.points.get(i as usize).copied().ok_or_else(|| {
                 crate::Error::Sequence(format!("{}: working point {i} out of range", f.name))
             })?;
-            w.push(p);
+            w.push(norm.point_to_fit(p));
         }
         points.push(w);
     }
     let m = step1.model.m;
     let poses: Vec<Vec<glam::DMat4>> = (0..k)
-        .map(|t| (0..m).map(|i| step1.model.pose(t, i)).collect())
+        .map(|t| {
+            (0..m)
+                .map(|i| norm.placement_to_fit(&step1.model.pose(t, i)))
+                .collect()
+        })
         .collect();
     let mut kin_opts = crate::kinematics::KinOptions::default();
     if step1.occlusion_used {
@@ -216,6 +223,7 @@ pub fn finish(
         clock,
         cb,
     )?;
+    norm.result_to_input(&mut result);
 
     // Every input point gets a part: segment the full frames with the Gaussians, then
     // map Gaussians to merged parts.
@@ -274,6 +282,13 @@ pub fn finish(
             working_sizes.iter().max().copied().unwrap_or(0)
         ));
     }
+    if !norm.is_identity() {
+        let c = norm.center;
+        notes.push(format!(
+            "fitted in normalised units: (x − ({:.4}, {:.4}, {:.4})) / {:.4}; the result is in input units",
+            c.x, c.y, c.z, norm.scale
+        ));
+    }
     notes.push(format!(
         "occlusion handling: {}",
         if step1.occlusion_used {
@@ -294,6 +309,7 @@ pub fn finish(
         "candidates": step1.candidates,
         "final_chamfer": step1.final_chamfer,
         "occlusion_used": step1.occlusion_used,
+        "normalisation": {"center": norm.center.to_array(), "scale": norm.scale},
         "iterations": step1.iterations,
         "working_sizes": working_sizes,
         "step1_seconds": step1.timings.total_s,

@@ -49,3 +49,94 @@ fn laptop_tree_and_hinge_are_exact_for_every_seed() {
     }
     assert!(failures.is_empty(), "{failures:#?}");
 }
+
+/// The fit does not depend on the input's units or placement: the laptop in millimetres,
+/// 5 m off the origin, gives the metre fit's segmentation and hinge, in millimetres.
+#[test]
+fn fit_is_the_same_in_millimetres_far_from_the_origin() {
+    use gsart::io::gt::JointType;
+    use gsart::normalisation::Normalisation;
+    let out = generate(&SynthOptions::new(ObjectKind::Laptop)).expect("generate");
+    let opts = FitOptions {
+        quality: Quality::Fast,
+        ..Default::default()
+    };
+    let to_mm = Normalisation {
+        center: glam::DVec3::new(5000.0, -3000.0, 200.0),
+        scale: 1000.0,
+    };
+    let mut mm = out.sequence.clone();
+    for f in &mut mm.frames {
+        for p in &mut f.points {
+            *p = to_mm.point_to_input(p.as_dvec3()).as_vec3();
+        }
+    }
+    let metre = fit(&out.sequence, &opts, &|_| Control::Continue).expect("fit in metres");
+    let milli = fit(&mm, &opts, &|_| Control::Continue).expect("fit in millimetres");
+    let (a, b) = (&metre.result, &milli.result);
+    assert_eq!(a.parts, b.parts);
+    let total: usize = a.labels.iter().map(Vec::len).sum();
+    let same: usize = a
+        .labels
+        .iter()
+        .zip(&b.labels)
+        .map(|(x, y)| x.iter().zip(y).filter(|(p, q)| p == q).count())
+        .sum();
+    assert!(
+        same as f64 >= 0.99 * total as f64,
+        "labels agree on {same} of {total} points"
+    );
+    // The metre fit's joints and poses, taken to millimetres, are the millimetre fit's.
+    let mut expect = a.clone();
+    to_mm.result_to_input(&mut expect);
+    let (ja, jb) = (
+        expect.joints.as_ref().expect("joints"),
+        b.joints.as_ref().expect("joints"),
+    );
+    assert_eq!(ja.len(), jb.len());
+    for (x, y) in ja.iter().zip(jb) {
+        assert_eq!(x.joint_type, y.joint_type);
+        let cos = glam::DVec3::from_array(x.axis).dot(glam::DVec3::from_array(y.axis));
+        assert!(cos.abs() > 0.9995, "axes {:?} vs {:?}", x.axis, y.axis);
+        if x.joint_type == JointType::Revolute {
+            // Pivots lie anywhere on the axis: compare their distance off the other axis.
+            let d = glam::DVec3::from_array(y.pivot) - glam::DVec3::from_array(x.pivot);
+            let off = (d - d.dot(glam::DVec3::from_array(x.axis))
+                * glam::DVec3::from_array(x.axis))
+            .length();
+            assert!(
+                off < 5.0,
+                "pivots {:?} vs {:?} ({off} mm apart)",
+                x.pivot,
+                y.pivot
+            );
+        }
+    }
+    // Poses move the canonical points to the same places (to 0.5 % of the object size).
+    use gsart::geom::se3::from_row_major;
+    let c = b.canonical_frame;
+    let mut worst = 0.0f64;
+    for (fa, fb) in expect.poses.iter().zip(&b.poses) {
+        for (x, &part) in mm.frames[c].points.iter().zip(&b.labels[c]) {
+            let (pa, pb) = (
+                from_row_major(&fa[part as usize]),
+                from_row_major(&fb[part as usize]),
+            );
+            let x = x.as_dvec3();
+            worst = worst.max((pa.transform_point3(x) - pb.transform_point3(x)).length());
+        }
+    }
+    assert!(worst < 5.0, "poses place a point {worst} mm apart");
+    let (ga, gb) = (
+        a.gaussians.as_ref().expect("gaussians"),
+        b.gaussians.as_ref().expect("gaussians"),
+    );
+    for (x, y) in ga.iter().zip(gb) {
+        for (sa, sb) in x.scale.iter().zip(&y.scale) {
+            assert!(
+                (sb / (1000.0 * sa) - 1.0).abs() < 0.01,
+                "scales {sa} m vs {sb} mm"
+            );
+        }
+    }
+}

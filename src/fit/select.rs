@@ -12,6 +12,7 @@ use super::flow::OtFlow;
 use super::schedule::Schedule;
 use super::{Step1Result, Timings};
 use crate::io::sequence::Sequence;
+use crate::normalisation::Normalisation;
 use crate::pipeline::{Control, FitOptions, Occlusion, Progress, Quality};
 use crate::{Error, Result};
 
@@ -110,6 +111,8 @@ fn validate(seq: &Sequence) -> Result<()> {
 
 /// Prepared inputs shared by every candidate.
 pub struct Prepared {
+    /// Input → fit units (`data` is in fit units; results are mapped back).
+    pub norm: Normalisation,
     pub data: Data,
     pub working: Vec<Vec<u32>>,
     pub occluded: bool,
@@ -125,7 +128,13 @@ pub const USE_FLOW: bool = true;
 
 pub fn prepare(seq: &Sequence, opts: &FitOptions) -> Result<Prepared> {
     validate(seq)?;
-    let (clouds, working) = working_clouds(seq, opts.working_size, opts.seed);
+    let norm = Normalisation::of(seq);
+    let (mut clouds, working) = working_clouds(seq, opts.working_size, opts.seed);
+    if !norm.is_identity() {
+        for c in &mut clouds {
+            *c = norm.points_to_fit(c);
+        }
+    }
     let occluded = match opts.occlusion {
         Occlusion::On => true,
         Occlusion::Off => false,
@@ -139,6 +148,7 @@ pub fn prepare(seq: &Sequence, opts: &FitOptions) -> Result<Prepared> {
     let flow = (USE_FLOW && !occluded)
         .then(|| FlowField::compute(&data, &OtFlow::default(), 256, opts.seed));
     Ok(Prepared {
+        norm,
         data,
         working,
         occluded,
@@ -228,7 +238,20 @@ pub fn run_candidate(
     }
     #[cfg(not(target_arch = "wasm32"))]
     let t0 = std::time::Instant::now();
-    let (params, stats) = fitter::fit_candidate(&prep.data, m, &cfg, prep.flow.as_ref(), cb)?;
+    // Snapshots go out in input units.
+    let mut report = |p: &Progress| match &p.snapshot {
+        Some(s) if !prep.norm.is_identity() => {
+            let mut s = s.clone();
+            prep.norm.snapshot_to_input(&mut s);
+            cb(&Progress {
+                snapshot: Some(s),
+                ..p.clone()
+            })
+        }
+        _ => cb(p),
+    };
+    let (params, stats) =
+        fitter::fit_candidate(&prep.data, m, &cfg, prep.flow.as_ref(), &mut report)?;
     #[cfg(not(target_arch = "wasm32"))]
     let secs = t0.elapsed().as_secs_f64();
     #[cfg(target_arch = "wasm32")]
@@ -236,8 +259,9 @@ pub fn run_candidate(
     Ok(candidate_result(prep, &params, m, stats.iterations, secs))
 }
 
-/// A fitted candidate as a `Step1Result`: its model, the labels of the working
-/// clouds, and the model-selection Chamfer. `secs` is the caller's timing.
+/// A fitted candidate as a `Step1Result`: its model (in input units), the labels of
+/// the working clouds, and the model-selection Chamfer (a mean squared distance, in
+/// input units²). `secs` is the caller's timing.
 pub fn candidate_result(
     prep: &Prepared,
     params: &super::gaussians::Params,
@@ -245,8 +269,10 @@ pub fn candidate_result(
     iterations: usize,
     secs: f64,
 ) -> Step1Result {
-    let final_chamfer = fitter::final_chamfer(&prep.data, params, prep.occluded, 1024);
-    let model = params.to_model();
+    let final_chamfer = fitter::final_chamfer(&prep.data, params, prep.occluded, 1024)
+        * prep.norm.scale
+        * prep.norm.scale;
+    let mut model = params.to_model();
     let labels = prep
         .data
         .frames32
@@ -254,6 +280,7 @@ pub fn candidate_result(
         .enumerate()
         .map(|(k, f)| model.segment(k, f))
         .collect();
+    prep.norm.model_to_input(&mut model);
     Step1Result {
         model,
         labels,

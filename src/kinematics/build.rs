@@ -56,7 +56,9 @@ impl Default for KinOptions {
     }
 }
 
-/// What Steps 2 and 3 found, for reports and debugging.
+/// What Steps 2 and 3 found, for reports and debugging. Lengths and losses here are
+/// in the fit units Steps 2–3 ran in (see `crate::normalisation`; the result's
+/// `info.normalisation` gives the map).
 #[derive(Debug, Clone, Serialize)]
 pub struct KinReport {
     /// Input part → merged part.
