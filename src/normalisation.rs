@@ -5,8 +5,8 @@
 //! absolute lengths, tuned on objects about the size of the unit box, like bench-dev.
 //! A sequence in other units — millimetres, or far from the origin — is fitted in
 //! "fit units": `x_fit = (x − center) / scale`, where the longest side of the bounding
-//! box over all frames is brought into `SIDE_MIN..=SIDE_MAX` and a box away from the
-//! origin is centred. The pipeline maps everything it reports (snapshots, the Step-1
+//! box over all frames (stray outliers left out) is brought into `SIDE_MIN..=SIDE_MAX`
+//! and a box away from the origin is centred. The pipeline maps everything it reports (snapshots, the Step-1
 //! model, the result) back to input units.
 //!
 use glam::{DMat3, DMat4, DVec3, Vec3};
@@ -36,26 +36,77 @@ impl Default for Normalisation {
     }
 }
 
+/// Points sampled (evenly over all frames) to find the quantile box.
+const BOX_SAMPLE: usize = 65_536;
+/// Fraction of the sample at each end of each axis the quantile box leaves out.
+const BOX_QUANTILE: f64 = 1e-3;
+/// Points farther than this × the quantile box's longest side outside that box are
+/// stray outliers. On bench-dev every point lies within 7 % (thin limb tips are a small
+/// fraction of the points), so there the box is the plain bounding box.
+const BOX_MARGIN: f64 = 0.25;
+
+/// The bounding box of the object's points over all frames, without stray outliers: a
+/// single point metres away (a scanner artefact) would otherwise set the scale.
+fn object_box(seq: &Sequence) -> (DVec3, DVec3) {
+    let total: usize = seq.frames.iter().map(|f| f.points.len()).sum();
+    let stride = total.div_ceil(BOX_SAMPLE).max(1);
+    let mut axes: [Vec<f32>; 3] = Default::default();
+    for p in seq
+        .frames
+        .iter()
+        .flat_map(|f| &f.points)
+        .step_by(stride)
+        .filter(|p| p.is_finite())
+    {
+        for (a, v) in axes.iter_mut().zip(p.to_array()) {
+            a.push(v);
+        }
+    }
+    let mut qlo = DVec3::splat(f64::NEG_INFINITY);
+    let mut qhi = DVec3::splat(f64::INFINITY);
+    // Too few points to tell an outlier: the plain bounding box.
+    if let Some(n) = axes[0].len().checked_sub(1).filter(|&n| n >= 64) {
+        // At least one sample left out at each end, so a lone stray point in a small
+        // cloud is caught too.
+        let k = ((BOX_QUANTILE * n as f64).ceil() as usize)
+            .max(1)
+            .min(n / 2);
+        let (i_lo, i_hi) = (k, n - k);
+        for (d, a) in axes.iter_mut().enumerate() {
+            let lo = *a.select_nth_unstable_by(i_lo, f32::total_cmp).1 as f64;
+            let hi = *a.select_nth_unstable_by(i_hi, f32::total_cmp).1 as f64;
+            qlo[d] = lo;
+            qhi[d] = hi;
+        }
+        let reach = BOX_MARGIN * (qhi - qlo).max_element();
+        qlo -= DVec3::splat(reach);
+        qhi += DVec3::splat(reach);
+    }
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    for p in seq.frames.iter().flat_map(|f| &f.points) {
+        let p = p.as_dvec3();
+        if p.is_finite() && p.cmpge(qlo).all() && p.cmple(qhi).all() {
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+    }
+    (lo, hi)
+}
+
 impl Normalisation {
     pub const IDENTITY: Normalisation = Normalisation {
         center: DVec3::ZERO,
         scale: 1.0,
     };
 
-    /// The normalisation of a sequence, from the bounding box over all its points: scale
-    /// = longest side / the nearest side in `SIDE_MIN..=SIDE_MAX` (1 inside that range
-    /// or for a box of zero size); centre = the box's middle when that lies more than
-    /// half a side from the origin, else the origin.
+    /// The normalisation of a sequence, from the bounding box over its points (stray
+    /// outliers excluded, see `object_box`): scale = longest side / the nearest side in
+    /// `SIDE_MIN..=SIDE_MAX` (1 inside that range or for a box of zero size); centre =
+    /// the box's middle when that lies more than half a side from the origin, else the
+    /// origin.
     pub fn of(seq: &Sequence) -> Self {
-        let mut lo = DVec3::splat(f64::INFINITY);
-        let mut hi = DVec3::splat(f64::NEG_INFINITY);
-        for p in seq.frames.iter().flat_map(|f| &f.points) {
-            let p = p.as_dvec3();
-            if p.is_finite() {
-                lo = lo.min(p);
-                hi = hi.max(p);
-            }
-        }
+        let (lo, hi) = object_box(seq);
         if !(lo.is_finite() && hi.is_finite()) {
             return Self::IDENTITY;
         }
@@ -242,6 +293,19 @@ mod tests {
         let n = Normalisation::of(&far);
         assert_eq!(n.scale, 1.0);
         assert!((n.center - DVec3::new(100.45, 0.1, 0.0)).length() < 1e-5);
+
+        // A stray point far away does not set the size.
+        let mut stray = seq(vec![
+            (0..200)
+                .map(|i| Vec3::new(i as f32 / 199.0 - 0.5, 0.0, 0.0))
+                .collect(),
+            (0..200)
+                .map(|i| Vec3::new(0.0, i as f32 / 398.0, 0.0))
+                .collect(),
+        ]);
+        assert!(Normalisation::of(&stray).is_identity());
+        stray.frames[1].points.push(Vec3::new(40.0, 0.0, 0.0));
+        assert!(Normalisation::of(&stray).is_identity());
 
         // Degenerate: one repeated point keeps the scale.
         let one = seq(vec![vec![Vec3::splat(7.0)], vec![Vec3::splat(7.0)]]);
