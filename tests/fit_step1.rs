@@ -161,3 +161,70 @@ fn rejects_bad_sequences() {
     o.parts = Some((3, 2));
     assert!(fit_step1(&two_boxes(2, 100, 4), &o, &|_| Control::Continue).is_err());
 }
+
+/// In millimetres 2 m off the origin, Step 1 reports in those units — the model, the
+/// live snapshots, the model-selection Chamfer — and segments as in metres.
+#[test]
+fn reports_in_input_units() {
+    let metres = two_boxes(4, 300, 1);
+    let offset = Vec3::new(2000.0, -500.0, 0.0);
+    let mut mm = metres.clone();
+    for f in &mut mm.frames {
+        for p in &mut f.points {
+            *p = *p * 1000.0 + offset;
+        }
+    }
+    let a = fit_step1_single(&metres, 2, &opts(), &mut |_| Control::Continue).unwrap();
+    let mut snaps = Vec::new();
+    let b = fit_step1_single(&mm, 2, &opts(), &mut |p| {
+        if let Some(s) = &p.snapshot {
+            snaps.push(s.clone());
+        }
+        Control::Continue
+    })
+    .unwrap();
+    let total: usize = a.labels.iter().map(Vec::len).sum();
+    let same: usize = a
+        .labels
+        .iter()
+        .zip(&b.labels)
+        .map(|(x, y)| x.iter().zip(y).filter(|(p, q)| p == q).count())
+        .sum();
+    assert!(
+        same as f64 >= 0.99 * total as f64,
+        "{same} of {total} labels agree"
+    );
+    for (ca, cb) in a.model.center.iter().zip(&b.model.center) {
+        let expect = Vec3::from_array(*ca) * 1000.0 + offset;
+        assert!(
+            expect.distance(Vec3::from_array(*cb)) < 5.0,
+            "centre {cb:?} mm, expected {expect:?}"
+        );
+    }
+    for (sa, sb) in a.model.log_scale.iter().zip(&b.model.log_scale) {
+        for (x, y) in sa.iter().zip(sb) {
+            assert!(
+                (y - x - 1000f32.ln()).abs() < 0.02,
+                "log-scales {x} m, {y} mm"
+            );
+        }
+    }
+    let ratio = b.final_chamfer / a.final_chamfer;
+    assert!((ratio / 1e6 - 1.0).abs() < 0.1, "Chamfer ratio {ratio}");
+    // Snapshots are drawn over the input points: centres among them, scales in mm.
+    assert!(!snaps.is_empty());
+    for s in &snaps {
+        for c in s.centers.chunks_exact(3) {
+            let c = Vec3::from_slice(c) - offset;
+            assert!(
+                c.abs().max_element() < 600.0,
+                "snapshot centre {c:?} off the object"
+            );
+        }
+        assert!(
+            s.scales.iter().all(|&v| v > 1.0 && v < 1000.0),
+            "{:?}",
+            s.scales
+        );
+    }
+}
