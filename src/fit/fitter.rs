@@ -632,7 +632,7 @@ pub fn fit_candidate(
                 sched.warmup,
                 vec![("mle".into(), lm), ("sep".into(), ls)],
                 &params,
-                false,
+                cfg.snapshot_every > 0 && it % cfg.snapshot_every == 0,
                 cb,
             )?;
         }
@@ -657,6 +657,17 @@ pub fn fit_candidate(
                     motion_seg::resegment(data, &mut params, ms);
                 }
             }
+            // The live view shows the Gaussians the round starts from (the search
+            // itself reports no snapshots: it holds the parameters).
+            report(
+                Stage::Init,
+                round * m,
+                total,
+                Vec::new(),
+                &params,
+                cfg.snapshot_every > 0,
+                cb,
+            )?;
             // Progress (and a chance to cancel) after every Gaussian searched.
             let mut tick = |done: usize| -> Result<()> {
                 let p = Progress {
