@@ -144,12 +144,14 @@ impl Normalisation {
         p * self.scale + self.center
     }
 
-    /// Input points in fit units (a copy; unchanged when the normalisation is the identity).
-    pub fn points_to_fit(&self, pts: &[Vec3]) -> Vec<Vec3> {
+    /// Input points to fit units, in place (untouched when the map is the identity).
+    pub fn points_to_fit(&self, pts: &mut [Vec3]) {
         if self.is_identity() {
-            return pts.to_vec();
+            return;
         }
-        pts.iter().map(|&p| self.point_to_fit(p)).collect()
+        for p in pts {
+            *p = self.point_to_fit(*p);
+        }
     }
 
     /// A length (scale, prismatic state, distance) in fit units back in input units.
@@ -267,7 +269,8 @@ mod tests {
         let n = Normalisation::of(&mm);
         assert!((n.scale - 2000.0).abs() < 1e-9);
         assert!((n.center - DVec3::new(2000.0, 250.0, 50.0)).length() < 1e-9);
-        let fit = n.points_to_fit(&mm.frames[0].points);
+        let mut fit = mm.frames[0].points.clone();
+        n.points_to_fit(&mut fit);
         assert!((fit[0] - Vec3::new(-0.5, -0.125, -0.025)).length() < 1e-6);
         assert!((fit[1] - Vec3::new(0.5, 0.125, -0.025)).length() < 1e-6);
         for &p in &mm.frames[0].points {

@@ -182,9 +182,9 @@ pub fn finish(
         )));
     }
     let canonical = 0;
-    // Steps 2–3 work in fit units like Step 1 (see `normalisation`); the Step-1 model
+    // Steps 2–3 work in Step 1's fit units (see `normalisation`); the Step-1 model
     // comes in input units.
-    let norm = crate::normalisation::Normalisation::of(seq);
+    let norm = step1.norm;
     let mut points = Vec::with_capacity(k);
     for (f, idx) in seq.frames.iter().zip(&step1.working) {
         let mut w = Vec::with_capacity(idx.len());

@@ -29,7 +29,10 @@ pub struct Timings {
 /// Result of Step 1 (the selected candidate).
 #[derive(Debug, Clone)]
 pub struct Step1Result {
+    /// The model, in input units.
     pub model: GaussianModel,
+    /// Input → fit units the candidate was fitted in (Steps 2–3 run in the same).
+    pub norm: crate::normalisation::Normalisation,
     /// Per frame, per working point: Gaussian index.
     pub labels: Vec<Vec<u32>>,
     /// Per frame: indices of the working points in the input frame (identity when

@@ -130,10 +130,8 @@ pub fn prepare(seq: &Sequence, opts: &FitOptions) -> Result<Prepared> {
     validate(seq)?;
     let norm = Normalisation::of(seq);
     let (mut clouds, working) = working_clouds(seq, opts.working_size, opts.seed);
-    if !norm.is_identity() {
-        for c in &mut clouds {
-            *c = norm.points_to_fit(c);
-        }
+    for c in &mut clouds {
+        norm.points_to_fit(c);
     }
     let occluded = match opts.occlusion {
         Occlusion::On => true,
@@ -283,6 +281,7 @@ pub fn candidate_result(
     prep.norm.model_to_input(&mut model);
     Step1Result {
         model,
+        norm: prep.norm,
         labels,
         working: prep.working.clone(),
         final_chamfer,
