@@ -98,7 +98,16 @@ fn main() {
         };
         o.keep_ratio = getf("--keep").unwrap_or(o.keep_ratio);
         o.rigid_ratio = getf("--rigid").unwrap_or(o.rigid_ratio);
-        pose_search::search_poses(&data, &mut params, &o, &mut |_| Ok(())).expect("search");
+        o.keep = getf("--trim").unwrap_or(o.keep);
+        o.snap_ratio = 0.0;
+        if args.iter().any(|a| a == "--occ") {
+            gsart::fit::occluded_search::search_poses_occluded(&data, &mut params, &o, &mut |_| {
+                Ok(())
+            })
+            .expect("search");
+        } else {
+            pose_search::search_poses(&data, &mut params, &o, &mut |_| Ok(())).expect("search");
+        }
     }
     eprintln!("search {:.2} s", t0.elapsed().as_secs_f64());
     let model = params.to_model();

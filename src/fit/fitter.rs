@@ -99,7 +99,8 @@ pub struct FitConfig {
     /// reconstruction error 7.52 → 4.69, flow error 8.16 → 4.55.
     pub pose_init: Option<PoseInitOpts>,
     /// Global pose search after the pose initialisation
-    /// (`pose_search::search_poses`); full (non-occluded) input only. None = off.
+    /// (`pose_search::search_poses`; on occluded input `occluded_search`, when
+    /// `PoseSearchOpts::occluded`). None = off.
     /// On by default: measured (Fast, true part count, bench-dev full) mean Step-1
     /// reconstruction error 7.30 → 1.59 before the main loop.
     pub pose_search: Option<PoseSearchOpts>,
@@ -691,7 +692,11 @@ pub fn fit_candidate(
                 },
                 ..*o
             };
-            pose_search::search_poses(data, &mut params, &o, &mut tick)?;
+            if cfg.occlusion {
+                super::occluded_search::search_poses_occluded(data, &mut params, &o, &mut tick)?;
+            } else {
+                pose_search::search_poses(data, &mut params, &o, &mut tick)?;
+            }
         }
     }
     adam.reset();

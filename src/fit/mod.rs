@@ -8,6 +8,7 @@ pub mod gaussians;
 pub mod init;
 pub mod losses;
 pub mod motion_seg;
+pub mod occluded_search;
 pub mod pose_init;
 pub mod pose_search;
 pub mod rot6d;

@@ -209,6 +209,11 @@ impl PrepareCache {
 /// 1.43 with vs 0.84 / 1.70 without.
 pub const SEARCH_MIN_POINTS: usize = 1024;
 
+/// The same bound for occluded input, whose frames show about half the points: the
+/// occluded search (`fit::occluded_search`) is measured on bench-dev's occluded
+/// frames (407–1347 points); below this it has not been tried.
+pub const OCCLUDED_SEARCH_MIN_POINTS: usize = 400;
+
 /// Runs one candidate m on prepared data.
 pub fn run_candidate(
     prep: &Prepared,
@@ -218,7 +223,12 @@ pub fn run_candidate(
 ) -> Result<Step1Result> {
     let mut cfg = FitConfig::new(prep.sched.clone(), prep.occluded, opts.seed);
     let fewest = prep.data.frames.iter().map(Vec::len).min().unwrap_or(0);
-    if fewest < SEARCH_MIN_POINTS {
+    let min_points = if prep.occluded {
+        OCCLUDED_SEARCH_MIN_POINTS
+    } else {
+        SEARCH_MIN_POINTS
+    };
+    if fewest < min_points {
         cfg.pose_search = None;
         cfg.motion_seg = None;
     }
