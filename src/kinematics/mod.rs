@@ -7,6 +7,7 @@ pub mod merge;
 pub mod observed;
 pub mod project;
 pub mod refine;
+pub mod relabel;
 pub mod screw;
 pub mod spatial;
 pub mod tree;
