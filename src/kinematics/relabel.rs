@@ -52,7 +52,6 @@ pub fn relabel(
     let grids: Vec<Grid> = clouds.iter().map(|c| Grid::new(c)).collect();
     let cap2 = (opts.cap * size * size) as f32;
     let mut changed = 0;
-    let mut cost = vec![0.0f32; parts];
     for k in 0..kk {
         if labels[k].len() != clouds[k].len() {
             continue;
@@ -79,21 +78,28 @@ pub fn relabel(
             if cur >= parts {
                 continue;
             }
-            for (p, c) in cost.iter_mut().enumerate() {
-                *c = motions[p]
-                    .iter()
-                    .zip(&others)
-                    .map(|((r, c), &t)| grids[t].nearest_d2_capped(*r * *x + *c, cap2))
-                    .sum();
+            // The current part's cost, then the others only while they can still
+            // beat it by the margin (most points fit their part and stop at once).
+            let cost_of = |p: usize, bound: f32| -> f32 {
+                let mut sum = 0.0f32;
+                for ((r, c), &t) in motions[p].iter().zip(&others) {
+                    sum += grids[t].nearest_d2_capped(*r * *x + *c, cap2);
+                    if sum >= bound {
+                        break;
+                    }
+                }
+                sum
+            };
+            let bound = (opts.margin * cost_of(cur, f32::INFINITY) as f64) as f32;
+            let mut best: Option<(usize, f32)> = None;
+            for p in (0..parts).filter(|&p| p != cur) {
+                let c = cost_of(p, best.map_or(bound, |b| b.1.min(bound)));
+                if c < bound && best.is_none_or(|b| c < b.1) {
+                    best = Some((p, c));
+                }
             }
-            let (best, cb) = cost
-                .iter()
-                .copied()
-                .enumerate()
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-                .unwrap_or((cur, 0.0));
-            if best != cur && (cb as f64) < opts.margin * cost[cur] as f64 {
-                labels[k][i] = best as u32;
+            if let Some((p, _)) = best {
+                labels[k][i] = p as u32;
                 changed += 1;
             }
         }
