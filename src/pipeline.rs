@@ -250,7 +250,7 @@ pub fn finish(
     let relabelled = if step1.occlusion_used {
         0
     } else {
-        let clouds: Vec<Vec<glam::Vec3>> = seq.frames.iter().map(|f| f.points.clone()).collect();
+        let clouds: Vec<&[glam::Vec3]> = seq.frames.iter().map(|f| f.points.as_slice()).collect();
         let poses: Vec<Vec<glam::DMat4>> = (0..k)
             .map(|t| {
                 (0..result.parts)

@@ -38,7 +38,7 @@ impl Default for RelabelOpts {
 /// onto the clouds of the other frames. `size` is the object's size in the clouds'
 /// units. Returns the number of changed labels.
 pub fn relabel(
-    clouds: &[Vec<Vec3>],
+    clouds: &[&[Vec3]],
     labels: &mut [Vec<u32>],
     poses: &[Vec<DMat4>],
     size: f64,
@@ -139,7 +139,7 @@ mod tests {
         }
         let poses = vec![vec![DMat4::IDENTITY; 2], vec![DMat4::IDENTITY, turn]];
         let n = relabel(
-            &[cloud, moved],
+            &[cloud.as_slice(), moved.as_slice()],
             &mut labels,
             &poses,
             2.0,
