@@ -238,6 +238,9 @@ pub fn search_poses_occluded(
                     let mo = (*r, moved - *r * pivot);
                     scored.push((explained(&tpl[j], &probe, mo), n));
                 }
+                if scored.is_empty() {
+                    continue;
+                }
                 let top = opts.top.min(scored.len());
                 scored.select_nth_unstable_by(top.saturating_sub(1), |a, b| b.0.total_cmp(&a.0));
                 best_rot.extend(scored[..top].iter().map(|&(_, n)| {
