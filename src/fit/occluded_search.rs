@@ -34,10 +34,11 @@ use crate::geom::knn::Grid;
 use crate::Result;
 
 use super::fitter::Data;
-use super::gaussians::{Gauss, Params};
-use super::pose_init::{frame0_groups, kabsch, relative_motion, set_relative_pose};
+use super::gaussians::Params;
+use super::pose_init::{kabsch, relative_motion, set_relative_pose};
 use super::pose_search::{
-    contacts, pivot_neighbours, uniform_rotations, visiting_order, Motion, PoseSearchOpts,
+    contacts, frame0_start, pivot_neighbours, uniform_rotations, visiting_order, Motion,
+    PoseSearchOpts,
 };
 
 /// Squared inlier radius (normalised units): a frame point within it of the moved
@@ -131,14 +132,10 @@ pub fn search_poses_occluded(
     opts: &PoseSearchOpts,
     tick: &mut dyn FnMut(usize) -> Result<()>,
 ) -> Result<()> {
-    let kk = data.k();
-    let m = params.layout.m;
-    if kk < 2 || m == 0 || data.frames[0].is_empty() {
+    let Some((g0, groups)) = frame0_start(data, params, opts.points) else {
         return Ok(());
-    }
-    let mut g0: Vec<Gauss> = Vec::new();
-    params.frame_into(0, &mut g0);
-    let groups = frame0_groups(data, &g0, opts.points);
+    };
+    let (kk, m) = (data.k(), g0.len());
     let con = contacts(&groups);
     let rots = uniform_rotations(opts.rotations);
     let mut tpl: Vec<Template> = groups.iter().map(|g| Template::new(g.clone())).collect();

@@ -381,6 +381,23 @@ pub(crate) fn pivot_neighbours(con: &Contacts, posed: &[bool], j: usize, n: usiz
     nbrs
 }
 
+/// What both searches start from: the frame-0 Gaussians and each one's frame-0 points
+/// (a subsample of at most `points`); `None` when there is nothing to search (one
+/// frame, no Gaussian, or an empty frame 0).
+pub(crate) fn frame0_start(
+    data: &Data,
+    params: &Params,
+    points: usize,
+) -> Option<(Vec<Gauss>, Vec<Vec<DVec3>>)> {
+    if data.k() < 2 || params.layout.m == 0 || data.frames[0].is_empty() {
+        return None;
+    }
+    let mut g0: Vec<Gauss> = Vec::new();
+    params.frame_into(0, &mut g0);
+    let groups = frame0_groups(data, &g0, points);
+    Some((g0, groups))
+}
+
 /// Searches every Gaussian's pose in frames t ≥ 1 (see the module doc) and writes
 /// the chosen ones into `params`; frame 0 is left unchanged. `tick(done)` is called
 /// after each Gaussian; an error from it (a cancel) stops the search.
@@ -391,14 +408,10 @@ pub fn search_poses(
     opts: &PoseSearchOpts,
     tick: &mut dyn FnMut(usize) -> Result<()>,
 ) -> Result<()> {
-    let kk = data.k();
-    let m = params.layout.m;
-    if kk < 2 || m == 0 || data.frames[0].is_empty() {
+    let Some((g0, groups)) = frame0_start(data, params, opts.points) else {
         return Ok(());
-    }
-    let mut g0: Vec<Gauss> = Vec::new();
-    params.frame_into(0, &mut g0);
-    let groups = frame0_groups(data, &g0, opts.points);
+    };
+    let (kk, m) = (data.k(), g0.len());
     let probes: Vec<Vec<DVec3>> = groups
         .iter()
         .map(|g| {
