@@ -15,9 +15,9 @@ pub struct RelabelOpts {
     /// full, fast): mean RI 0.885 at 4e-4, 0.886 at 1e-3 and 3e-3.
     pub cap: f64,
     /// A point changes part only when the other part's cost is below this factor of
-    /// its current part's cost. Measured (bench-dev full, fast, cap 1e-3): mean RI
-    /// 0.882 at 0.3, 0.886 at 0.5, 0.875 at 0.8 (too eager: points at a joint fit
-    /// both parts).
+    /// its current part's cost. Measured (bench-dev full, fast): mean RI 0.882 at 0.3,
+    /// 0.886 at 0.5 (cap 1e-3), 0.875 at 0.8 (cap 4e-4; too eager: points at a joint
+    /// fit both parts).
     pub margin: f64,
     /// At most this many other frames are compared (evenly spread).
     pub frames: usize,
