@@ -38,8 +38,8 @@ use super::fitter::Data;
 use super::gaussians::Params;
 use super::pose_init::{kabsch, relative_motion, set_relative_pose};
 use super::pose_search::{
-    contacts, frame0_start, pivot_neighbours, uniform_rotations, visiting_order, Motion,
-    PoseSearchOpts,
+    contacts, frame0_start, pivot_neighbours, root_min_size, uniform_rotations, visiting_order,
+    Motion, PoseSearchOpts,
 };
 
 /// Squared inlier radius (normalised units): a frame point within it of the moved
@@ -142,9 +142,7 @@ pub fn search_poses_occluded(
     let mut tpl: Vec<Template> = groups.iter().map(|g| Template::new(g.clone())).collect();
     // Root: among Gaussians with at least half the median point count, the one whose
     // frame-0 points explain the most of the other frames in place.
-    let mut sizes: Vec<usize> = groups.iter().map(Vec::len).collect();
-    sizes.sort_unstable();
-    let min_size = (sizes[m / 2] / 2).max(3);
+    let min_size = root_min_size(&groups);
     let id: Motion = (DMat3::IDENTITY, DVec3::ZERO);
     let root = (0..m)
         .filter(|&i| groups[i].len() >= min_size)
@@ -160,26 +158,37 @@ pub fn search_poses_occluded(
     let order: Vec<usize> = std::iter::once(root)
         .chain(visiting_order(&con, root))
         .collect();
-    // Pivot neighbours and the template's reach around the main pivot.
+    // Pivot neighbours, and how far the frame-0 points reach from each pivot (the
+    // frame points a rotation about it can explain).
     let mut posed = vec![false; m];
     let mut nbrs: Vec<Vec<usize>> = vec![Vec::new(); m];
+    let mut reach: Vec<Vec<f64>> = vec![Vec::new(); m];
     for &j in &order {
         if j != root {
             nbrs[j] = pivot_neighbours(&con, &posed, j, opts.pivots);
+            reach[j] = nbrs[j]
+                .iter()
+                .map(|&i| {
+                    let pivot = con.b[i][j];
+                    groups[j]
+                        .iter()
+                        .map(|p| p.distance_squared(pivot))
+                        .fold(0.0, f64::max)
+                        .sqrt()
+                        + R2.sqrt()
+                })
+                .collect();
         }
         posed[j] = true;
     }
-    let mut rel: Vec<Vec<Motion>> = (0..m)
-        .map(|i| {
-            let mut gt = Vec::new();
-            (0..kk)
-                .map(|t| {
-                    params.frame_into(t, &mut gt);
-                    relative_motion(&g0[i], &gt[i])
-                })
-                .collect()
-        })
-        .collect();
+    let mut rel: Vec<Vec<Motion>> = vec![Vec::with_capacity(kk); m];
+    let mut gt = Vec::new();
+    for t in 0..kk {
+        params.frame_into(t, &mut gt);
+        for (i, r) in rel.iter_mut().enumerate() {
+            r.push(relative_motion(&g0[i], &gt[i]));
+        }
+    }
     let keep_frac = if opts.keep_ratio > 0.0 {
         1.0 / opts.keep_ratio
     } else {
@@ -209,18 +218,11 @@ pub fn search_poses_occluded(
                 cands.push(id);
             }
             let mut best_rot: Vec<Motion> = Vec::new();
-            for &i in &nbrs[j] {
+            for (&i, &reach) in nbrs[j].iter().zip(&reach[j]) {
                 let (ri, ci) = rel[i][t];
                 cands.push((ri, ci));
                 let pivot = con.b[i][j];
                 let moved = ri * pivot + ci;
-                // Frame points the template can reach when rotated about the pivot.
-                let reach = groups[j]
-                    .iter()
-                    .map(|p| p.distance_squared(pivot))
-                    .fold(0.0, f64::max)
-                    .sqrt()
-                    + R2.sqrt();
                 let near: Vec<DVec3> = free
                     .iter()
                     .filter(|y| y.distance_squared(moved) <= reach * reach)

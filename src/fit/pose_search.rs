@@ -381,6 +381,14 @@ pub(crate) fn pivot_neighbours(con: &Contacts, posed: &[bool], j: usize, n: usiz
     nbrs
 }
 
+/// The root is chosen among Gaussians with at least this many frame-0 points: half
+/// the median count (at least 3), so a tiny piece that happens to stay put is not it.
+pub(crate) fn root_min_size(groups: &[Vec<DVec3>]) -> usize {
+    let mut sizes: Vec<usize> = groups.iter().map(Vec::len).collect();
+    sizes.sort_unstable();
+    sizes.get(sizes.len() / 2).map_or(3, |s| (s / 2).max(3))
+}
+
 /// What both searches start from: the frame-0 Gaussians and each one's frame-0 points
 /// (a subsample of at most `points`); `None` when there is nothing to search (one
 /// frame, no Gaussian, or an empty frame 0).
@@ -437,9 +445,7 @@ pub fn search_poses(
     let mut targets: Vec<Target> = (0..kk).map(|t| Target::frame(data, t)).collect();
     // Root: among Gaussians with at least half the median point count, the one
     // whose best of {identity, current} fits best over the frames.
-    let mut sizes: Vec<usize> = groups.iter().map(Vec::len).collect();
-    sizes.sort_unstable();
-    let min_size = (sizes[m / 2] / 2).max(3);
+    let min_size = root_min_size(&groups);
     let mut root = None;
     let mut root_score = f64::INFINITY;
     for i in (0..m).filter(|&i| groups[i].len() >= min_size) {
