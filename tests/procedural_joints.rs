@@ -4,7 +4,8 @@
 //! axis within 5° and its pivot within 2 % of the object size, for four generator seeds.
 //!
 //! The other procedural objects (cabinet, arm, hand, quadruped) do not meet this yet;
-//! the README's accuracy section lists where each stands.
+//! the README's accuracy section lists where each stands. The cabinet is held to what
+//! it reaches now (three of its four parts, two joints of the right type).
 
 use gsart::pipeline::{evaluate, fit, Control, FitOptions, Quality};
 use gsart::synth::{generate, ObjectKind, SynthOptions};
@@ -139,4 +140,37 @@ fn fit_is_the_same_in_millimetres_far_from_the_origin() {
             );
         }
     }
+}
+
+/// The cabinet (two drawers and a door on a static body of thin panels, 2048 points
+/// per frame) comes apart into its moving parts. Until the pose search's distance cap
+/// followed the point spacing, a correct pose scored barely better than a wrong one
+/// on these sparse panels and every m came out as one rigid body (RI 0.448, TED 3).
+#[test]
+fn cabinet_comes_apart_into_its_moving_parts() {
+    let out = generate(&SynthOptions {
+        seed: 3,
+        ..SynthOptions::new(ObjectKind::Cabinet)
+    })
+    .expect("generate");
+    let opts = FitOptions {
+        quality: Quality::Fast,
+        ..Default::default()
+    };
+    let fitted = fit(&out.sequence, &opts, &|_| Control::Continue).expect("fit");
+    let m = evaluate(&fitted.result, &out.sequence, &out.gt).expect("evaluate");
+    let j = m.joints.as_ref().expect("joint errors");
+    eprintln!(
+        "cabinet: parts {} RI {:.3} recon {:.2} TED {:?} joints found {}/{} types {}",
+        fitted.result.parts,
+        m.mean_ri,
+        m.reconstruction_error,
+        m.tree_edit_distance,
+        j.found,
+        j.joints,
+        j.type_correct,
+    );
+    assert!(fitted.result.parts >= 3, "{} parts", fitted.result.parts);
+    assert!(m.mean_ri >= 0.65, "RI {}", m.mean_ri);
+    assert!(j.type_correct >= 2, "{j:?}");
 }

@@ -17,7 +17,6 @@ use super::pose_init::{self, PoseInitOpts};
 use super::pose_search::{self, PoseSearchOpts};
 use super::schedule::Schedule;
 use crate::geom::assignment::Lap;
-use crate::geom::cap_mask::CapMask;
 use crate::geom::knn::Grid;
 use crate::pipeline::{Control, Progress, Stage};
 use crate::{Error, Result};
@@ -28,9 +27,9 @@ pub struct Data {
     pub frames32: Vec<Vec<Vec3>>,
     pub frames: Vec<Vec<DVec3>>,
     pub grids: Vec<Grid>,
-    /// Per frame, the places beyond the pose search's distance cap (built by
-    /// `pose_search` on first use, then shared by its searches and candidates).
-    pub(crate) cap_masks: std::sync::OnceLock<Vec<CapMask>>,
+    /// The pose search's distance cap and, per frame, the places beyond it (built
+    /// by `pose_search` on first use, then shared by its searches and candidates).
+    pub(crate) search_cap: std::sync::OnceLock<pose_search::SearchCap>,
 }
 
 impl Data {
@@ -44,7 +43,7 @@ impl Data {
             frames32,
             frames,
             grids,
-            cap_masks: std::sync::OnceLock::new(),
+            search_cap: std::sync::OnceLock::new(),
         }
     }
     pub fn k(&self) -> usize {

@@ -30,6 +30,7 @@ use glam::{DMat3, DQuat, DVec3, Vec3};
 
 use crate::geom::cap_mask::CapMask;
 use crate::geom::knn::Grid;
+use crate::kinematics::spatial::point_spacing;
 use crate::Result;
 
 use super::fitter::Data;
@@ -157,6 +158,8 @@ pub struct Target<'a> {
     /// Places farther than the cap from all of the frame's points (exact for the
     /// claimed-down cloud too: removing points only moves them farther).
     far: &'a CapMask,
+    /// The sequence's squared-distance cap (`SearchCap`).
+    cap2: f64,
     /// Per frame point: still free.
     free: Vec<bool>,
 }
@@ -164,11 +167,12 @@ pub struct Target<'a> {
 impl<'a> Target<'a> {
     /// All of frame `t`'s points.
     pub fn frame(data: &'a Data, t: usize) -> Self {
-        let masks = cap_masks(data);
+        let cap = search_cap(data);
         Target {
             pts: data.frames[t].clone(),
             grid: data.grids[t].clone(),
-            far: &masks[t],
+            far: &cap.masks[t],
+            cap2: cap.cap2,
             free: vec![true; data.frames[t].len()],
         }
     }
@@ -204,33 +208,45 @@ impl<'a> Target<'a> {
         self.grid.rebuild(&p32);
     }
 
-    /// Squared distance from `x` to the nearest free point, capped at `CAP2`.
+    /// Squared distance from `x` to the nearest free point, capped.
     #[inline]
     fn capped_d2(&self, x: Vec3) -> f64 {
-        capped_d2(self.far, &self.grid, x)
+        capped_d2(self.far, self.cap2, &self.grid, x)
     }
 }
 
-/// Squared distance from `x` to the nearest point of `grid`, capped at `CAP2`; `far`
-/// (a mask of the same cloud or a superset) answers places beyond the cap at once.
+/// Squared distance from `x` to the nearest point of `grid`, capped at `cap2`; `far`
+/// (a mask of the same cloud or a superset, built for that cap) answers places
+/// beyond the cap at once.
 #[inline]
-fn capped_d2(far: &CapMask, grid: &Grid, x: Vec3) -> f64 {
+fn capped_d2(far: &CapMask, cap2: f64, grid: &Grid, x: Vec3) -> f64 {
     if far.far(x) {
-        return CAP2;
+        return cap2;
     }
-    grid.nearest_d2_capped(x, CAP2 as f32) as f64
+    grid.nearest_d2_capped(x, cap2 as f32) as f64
 }
 
-/// Per frame, the places farther than the cap from every point (built once per
-/// prepared sequence).
-fn cap_masks(data: &Data) -> &[CapMask] {
-    data.cap_masks.get_or_init(|| {
-        let r = (CAP2 as f32).sqrt();
-        data.frames32.iter().map(|f| CapMask::new(f, r)).collect()
+/// The search's squared-distance cap for one sequence and, per frame, the places
+/// farther than it from every point (built once per prepared sequence).
+#[derive(Debug, Clone)]
+pub struct SearchCap {
+    pub(crate) cap2: f64,
+    masks: Vec<CapMask>,
+}
+
+fn search_cap(data: &Data) -> &SearchCap {
+    data.search_cap.get_or_init(|| {
+        let spacing = data.frames32.first().map_or(0.0, |f| point_spacing(f));
+        let cap2 = CAP2.max((CAP_SPACINGS * spacing).powi(2));
+        let r = (cap2 as f32).sqrt();
+        SearchCap {
+            cap2,
+            masks: data.frames32.iter().map(|f| CapMask::new(f, r)).collect(),
+        }
     })
 }
 
-/// Trimmed mean squared distance (each capped at `CAP2`) from the moved points to
+/// Trimmed mean squared distance (each capped, `SearchCap`) from the moved points to
 /// the target.
 pub fn score(tg: &Target, pts: &[DVec3], mo: Motion, keep: f64, buf: &mut Vec<f64>) -> f64 {
     buf.clear();
@@ -692,6 +708,13 @@ const SWITCH_MARGIN: f64 = 1.0;
 /// not dominate the coverage score.
 const CAP2: f64 = 1e-3;
 
+/// On sparse clouds the cap grows to this many point spacings (frame 0's median
+/// nearest-neighbour distance): a fixed cap below the spacing makes a correct pose
+/// score nearly as badly as a wrong one. Bench-dev's robots (4096 points, spacing
+/// 0.006–0.010) keep `CAP2`; the procedural cabinet (2048 points on many panels,
+/// spacing 0.027) gets 0.005.
+const CAP_SPACINGS: f64 = 2.6;
+
 /// Chooses one motion per Gaussian from its pool for frame `t` by coordinate
 /// descent on the bidirectional Chamfer between the union of the moved groups and
 /// frame t's cloud: the one-sided search cannot see frame-t points that no
@@ -714,7 +737,8 @@ fn select_by_coverage(
     let mut fwd: Vec<Vec<f64>> = Vec::with_capacity(m);
     let mut rev: Vec<Vec<Vec<f64>>> = Vec::with_capacity(m);
     let mut moved = Vec::new();
-    let far = &cap_masks(data)[t];
+    let cap = search_cap(data);
+    let (far, cap2) = (&cap.masks[t], cap.cap2);
     for j in 0..m {
         let mut fj = Vec::with_capacity(pool[j].len());
         let mut rj = Vec::with_capacity(pool[j].len());
@@ -723,12 +747,12 @@ fn select_by_coverage(
             moved.extend(groups[j].iter().map(|p| r * *p + c));
             let f: f64 = moved
                 .iter()
-                .map(|x| capped_d2(far, &data.grids[t], x.as_vec3()))
+                .map(|x| capped_d2(far, cap2, &data.grids[t], x.as_vec3()))
                 .sum();
             fj.push(f);
             // Targets outside the moved group's box grown by the cap are at the cap:
             // a Gaussian covers a small part of the frame, so most skip the scan.
-            let reach = DVec3::splat(CAP2.sqrt());
+            let reach = DVec3::splat(cap2.sqrt());
             let (lo, hi) = moved.iter().fold(
                 (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
                 |(lo, hi), x| (lo.min(*x), hi.max(*x)),
@@ -738,12 +762,12 @@ fn select_by_coverage(
                 ys.iter()
                     .map(|y| {
                         if y.cmplt(lo).any() || y.cmpgt(hi).any() {
-                            return CAP2;
+                            return cap2;
                         }
                         moved
                             .iter()
                             .map(|x| x.distance_squared(*y))
-                            .fold(CAP2, f64::min)
+                            .fold(cap2, f64::min)
                     })
                     .collect(),
             );
@@ -763,7 +787,7 @@ fn select_by_coverage(
                 *o = (0..m)
                     .filter(|&i| i != j && !pool[i].is_empty())
                     .map(|i| rev[i][sel[i]][y])
-                    .fold(CAP2, f64::min);
+                    .fold(cap2, f64::min);
             }
             let fwd_others: f64 = (0..m)
                 .filter(|&i| i != j && !pool[i].is_empty())
@@ -994,6 +1018,25 @@ pub(crate) mod tests {
                 "frame {t}: centre {:?} vs {c:?}",
                 arm.mu
             );
+        }
+    }
+
+    #[test]
+    fn the_cap_follows_the_point_spacing_on_sparse_clouds() {
+        // 3000 points on the hinge: spacing ~0.005, the fixed cap; 100 points:
+        // spacing ~0.027, about the fixed cap's radius (0.032).
+        let dense = Data::new(vec![hinge(0.0, 3000, 1).0]);
+        let sparse = Data::new(vec![hinge(0.0, 100, 1).0]);
+        assert_eq!(search_cap(&dense).cap2, CAP2);
+        let s = point_spacing(&sparse.frames32[0]);
+        assert!(s > 0.5 * CAP2.sqrt(), "spacing {s}");
+        let want = (CAP_SPACINGS * s).powi(2);
+        assert!((search_cap(&sparse).cap2 - want).abs() < 1e-12);
+        // The masks answer for that cap: a place just beyond it is far.
+        let tg = Target::frame(&sparse, 0);
+        let p = sparse.frames32[0][0] + Vec3::new(0.0, 0.0, 1.05 * want.sqrt() as f32);
+        if sparse.grids[0].nearest_d2_capped(p, 1.0) as f64 > want {
+            assert_eq!(tg.capped_d2(p), want);
         }
     }
 
