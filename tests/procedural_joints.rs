@@ -7,24 +7,32 @@
 //! the README's accuracy section lists where each stands. The cabinet is held to what
 //! it reaches now (three of its four parts, two joints of the right type).
 
+use gsart::eval::Metrics;
 use gsart::pipeline::{evaluate, fit, Control, FitOptions, Quality};
 use gsart::synth::{generate, ObjectKind, SynthOptions};
+
+/// Generates `kind` with generator seed `seed`, fits it (fast preset, default part
+/// range) and evaluates it: the result's part count and the metrics.
+fn fit_and_evaluate(kind: ObjectKind, seed: u64) -> (usize, Metrics) {
+    let out = generate(&SynthOptions {
+        seed,
+        ..SynthOptions::new(kind)
+    })
+    .expect("generate");
+    let opts = FitOptions {
+        quality: Quality::Fast,
+        ..Default::default()
+    };
+    let fitted = fit(&out.sequence, &opts, &|_| Control::Continue).expect("fit");
+    let m = evaluate(&fitted.result, &out.sequence, &out.gt).expect("evaluate");
+    (fitted.result.parts, m)
+}
 
 #[test]
 fn laptop_tree_and_hinge_are_exact_for_every_seed() {
     let mut failures = Vec::new();
     for seed in 0..4 {
-        let out = generate(&SynthOptions {
-            seed,
-            ..SynthOptions::new(ObjectKind::Laptop)
-        })
-        .expect("generate");
-        let opts = FitOptions {
-            quality: Quality::Fast,
-            ..Default::default()
-        };
-        let fitted = fit(&out.sequence, &opts, &|_| Control::Continue).expect("fit");
-        let m = evaluate(&fitted.result, &out.sequence, &out.gt).expect("evaluate");
+        let (_, m) = fit_and_evaluate(ObjectKind::Laptop, seed);
         let j = m.joints.as_ref().expect("joint errors");
         eprintln!(
             "laptop seed {seed}: RI {:.3} recon {:.2} TED {:?} joints found {}/{} types {} axis {:?}° pivot {:?}",
@@ -148,29 +156,13 @@ fn fit_is_the_same_in_millimetres_far_from_the_origin() {
 /// on these sparse panels and every m came out as one rigid body (RI 0.448, TED 3).
 #[test]
 fn cabinet_comes_apart_into_its_moving_parts() {
-    let out = generate(&SynthOptions {
-        seed: 3,
-        ..SynthOptions::new(ObjectKind::Cabinet)
-    })
-    .expect("generate");
-    let opts = FitOptions {
-        quality: Quality::Fast,
-        ..Default::default()
-    };
-    let fitted = fit(&out.sequence, &opts, &|_| Control::Continue).expect("fit");
-    let m = evaluate(&fitted.result, &out.sequence, &out.gt).expect("evaluate");
+    let (parts, m) = fit_and_evaluate(ObjectKind::Cabinet, 3);
     let j = m.joints.as_ref().expect("joint errors");
     eprintln!(
-        "cabinet: parts {} RI {:.3} recon {:.2} TED {:?} joints found {}/{} types {}",
-        fitted.result.parts,
-        m.mean_ri,
-        m.reconstruction_error,
-        m.tree_edit_distance,
-        j.found,
-        j.joints,
-        j.type_correct,
+        "cabinet: parts {parts} RI {:.3} recon {:.2} TED {:?} joints found {}/{} types {}",
+        m.mean_ri, m.reconstruction_error, m.tree_edit_distance, j.found, j.joints, j.type_correct,
     );
-    assert!(fitted.result.parts >= 3, "{} parts", fitted.result.parts);
+    assert!(parts >= 3, "{parts} parts");
     assert!(m.mean_ri >= 0.65, "RI {}", m.mean_ri);
     assert!(j.type_correct >= 2, "{j:?}");
 }
