@@ -29,8 +29,8 @@
 use glam::{DMat3, DQuat, DVec3, Vec3};
 
 use crate::geom::cap_mask::CapMask;
+use crate::geom::knn::point_spacing;
 use crate::geom::knn::Grid;
-use crate::kinematics::spatial::point_spacing;
 use crate::Result;
 
 use super::fitter::Data;

@@ -1,6 +1,6 @@
 //! Nearest-neighbour index for point clouds in a bounded box: a uniform grid with
 //! counting-sort construction (O(N), buffers reused across rebuilds) and an
-//! expanding-shell 1-NN query.
+//! expanding-shell 1-NN query; and the point spacing of a cloud.
 //!
 //! Why a grid rather than a kd-tree crate: the fit rebuilds indices of moving clouds
 //! (a few hundred to a few thousand points) every iteration, and queries come from
@@ -311,6 +311,29 @@ impl Grid {
             }
         }
     }
+}
+
+/// Median nearest-neighbour distance over a deterministic sample of ≤ 256 points.
+pub fn point_spacing(points: &[Vec3]) -> f64 {
+    if points.len() < 2 {
+        return 0.0;
+    }
+    let step = (points.len() / 256).max(1);
+    let mut d: Vec<f32> = points
+        .iter()
+        .enumerate()
+        .step_by(step)
+        .map(|(i, p)| {
+            points
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, q)| p.distance_squared(*q))
+                .fold(f32::INFINITY, f32::min)
+        })
+        .collect();
+    d.sort_by(|a, b| a.total_cmp(b));
+    (d[d.len() / 2] as f64).sqrt()
 }
 
 #[cfg(test)]

@@ -17,6 +17,8 @@ use std::collections::HashMap;
 
 use glam::Vec3;
 
+use crate::geom::knn::point_spacing;
+
 /// Search radius in units of the point spacing.
 pub const RADIUS_SPACINGS: f64 = 4.0;
 /// Points per part used for the far-pair estimate.
@@ -51,29 +53,6 @@ fn cell(p: Vec3, inv: f32) -> (i32, i32, i32) {
         (p.y * inv).floor() as i32,
         (p.z * inv).floor() as i32,
     )
-}
-
-/// Median nearest-neighbour distance over a deterministic sample of ≤ 256 points.
-pub fn point_spacing(points: &[Vec3]) -> f64 {
-    if points.len() < 2 {
-        return 0.0;
-    }
-    let step = (points.len() / 256).max(1);
-    let mut d: Vec<f32> = points
-        .iter()
-        .enumerate()
-        .step_by(step)
-        .map(|(i, p)| {
-            points
-                .iter()
-                .enumerate()
-                .filter(|(j, _)| *j != i)
-                .map(|(_, q)| p.distance_squared(*q))
-                .fold(f32::INFINITY, f32::min)
-        })
-        .collect();
-    d.sort_by(|a, b| a.total_cmp(b));
-    (d[d.len() / 2] as f64).sqrt()
 }
 
 /// Per-frame minimum squared distances between all part pairs (∞ if a part is absent).
