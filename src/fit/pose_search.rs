@@ -226,6 +226,17 @@ fn capped_d2(far: &CapMask, cap2: f64, grid: &Grid, x: Vec3) -> f64 {
     grid.nearest_d2_capped(x, cap2 as f32) as f64
 }
 
+/// Squared distances (normalised units) are capped at least here in the search's
+/// scores and the coverage selection, so one far-off point does not dominate.
+const CAP2: f64 = 1e-3;
+
+/// On sparse clouds the cap grows to this many point spacings (frame 0's median
+/// nearest-neighbour distance): a fixed cap below the spacing makes a correct pose
+/// score nearly as badly as a wrong one. Bench-dev's robots (4096 points, spacing
+/// 0.006–0.010) keep `CAP2`; the procedural cabinet (2048 points on many panels,
+/// spacing 0.027) gets 0.005.
+const CAP_SPACINGS: f64 = 2.6;
+
 /// The search's squared-distance cap for one sequence and, per frame, the places
 /// farther than it from every point (built once per prepared sequence).
 #[derive(Debug, Clone)]
@@ -703,17 +714,6 @@ fn search_one(
 /// Factor by which another candidate must beat the preferred one in the coverage
 /// selection.
 const SWITCH_MARGIN: f64 = 1.0;
-
-/// Squared distances are capped here (normalised units) so one far-off point does
-/// not dominate the coverage score.
-const CAP2: f64 = 1e-3;
-
-/// On sparse clouds the cap grows to this many point spacings (frame 0's median
-/// nearest-neighbour distance): a fixed cap below the spacing makes a correct pose
-/// score nearly as badly as a wrong one. Bench-dev's robots (4096 points, spacing
-/// 0.006–0.010) keep `CAP2`; the procedural cabinet (2048 points on many panels,
-/// spacing 0.027) gets 0.005.
-const CAP_SPACINGS: f64 = 2.6;
 
 /// Chooses one motion per Gaussian from its pool for frame `t` by coordinate
 /// descent on the bidirectional Chamfer between the union of the moved groups and

@@ -57,9 +57,8 @@ pub fn relabel(
             continue;
         }
         // Other frames, evenly spread.
-        let others: Vec<usize> = (0..kk).filter(|&t| t != k).collect();
-        let step = others.len().div_ceil(opts.frames.max(1)).max(1);
-        let others: Vec<usize> = others.into_iter().step_by(step).collect();
+        let step = (kk - 1).div_ceil(opts.frames.max(1)).max(1);
+        let others: Vec<usize> = (0..kk).filter(|&t| t != k).step_by(step).collect();
         // Per part and other frame: the motion frame k → t, in f32.
         let motions: Vec<Vec<(Mat3, Vec3)>> = (0..parts)
             .map(|p| {
