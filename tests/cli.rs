@@ -192,3 +192,24 @@ fn bad_input_is_one_clear_line() {
     );
     assert!(!Path::new(&out).exists());
 }
+
+#[test]
+fn restarts_must_be_one_to_sixteen() {
+    let dir = tmp("restarts");
+    let out = dir.join("r.json");
+    for n in ["0", "17"] {
+        let (ok, _, err) = gsart(&[
+            "fit",
+            "missing_dir_is_not_read",
+            "--restarts",
+            n,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(!ok);
+        assert!(
+            err.starts_with("gsart: ") && err.contains("--restarts"),
+            "{err}"
+        );
+    }
+}

@@ -53,6 +53,10 @@ mod cli {
             occlusion: String,
             #[arg(long, default_value_t = 0)]
             seed: u64,
+            /// Step-1 fits per candidate part count, each from its own seed, keeping
+            /// the lowest final Chamfer (default: the quality preset's).
+            #[arg(long)]
+            restarts: Option<usize>,
             /// Frames larger than this are downsampled for the fit.
             #[arg(long, default_value_t = 4096)]
             working_size: usize,
@@ -153,6 +157,7 @@ mod cli {
                 quality,
                 occlusion,
                 seed,
+                restarts,
                 working_size,
                 ply_out,
                 urdf,
@@ -166,6 +171,7 @@ mod cli {
                 seed,
                 working_size,
             )
+            .and_then(|opts| with_restarts(opts, restarts))
             .and_then(|opts| {
                 fit(
                     &input,
@@ -226,6 +232,19 @@ mod cli {
         }
     }
 
+    /// `--restarts N` (N ≥ 1) on top of the parsed options.
+    fn with_restarts(opts: FitOptions, restarts: Option<usize>) -> Result<FitOptions> {
+        match restarts {
+            Some(0) => Err(Error::InvalidArgument(
+                "--restarts must be at least 1".into(),
+            )),
+            Some(n) if n > 16 => Err(Error::InvalidArgument(format!(
+                "--restarts {n}: at most 16"
+            ))),
+            _ => Ok(FitOptions { restarts, ..opts }),
+        }
+    }
+
     fn parse_options(
         parts: Option<&str>,
         iters: Option<usize>,
@@ -281,6 +300,7 @@ mod cli {
             occlusion,
             seed,
             working_size,
+            restarts: None,
         })
     }
 

@@ -46,5 +46,7 @@ pub struct Step1Result {
     pub m: usize,
     /// Every candidate tried: (m, final Chamfer).
     pub candidates: Vec<(usize, f64)>,
+    /// Fits per candidate (the best of them stands for its m).
+    pub restarts: usize,
     pub timings: Timings,
 }

@@ -31,6 +31,8 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   await page.getByLabel('Automatic part range').uncheck();
   await page.getByLabel('Minimum part count').fill('2');
   await page.getByLabel('Maximum part count').fill('4');
+  // Two fits per part count (restarts), the better one counting.
+  await page.getByLabel('Fits per part count').selectOption('2');
   await page.locator('#btn-fit').click();
   // The view as the fit starts, to compare with views taken while Step 1 runs.
   let a = await canvasPng(page);
@@ -40,6 +42,7 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   await page.waitForFunction(() => /running|left/.test(document.querySelector('#stage-list').innerText), null, { timeout: 120_000 });
   // Fast tries the two ends of the range (the core's rule).
   assert.match(await page.locator('#fit-status').innerText(), /m = 2, 4 of 2…4/);
+  assert.match(await page.locator('#fit-status').innerText(), /best of 2 fits each/);
   // A view taken while a Step-1 candidate still runs must differ from the first one
   // (or from the one before it). Sampled back to back, not at fixed times: a view takes
   // ~0.5 s to capture under SwiftShader, and on a quiet machine the laptop's Step 1
@@ -89,6 +92,7 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   assert.equal(json.format, 'gsart-result');
   assert.equal(json.version, 1);
   assert.equal(json.frames, json.labels.length);
+  assert.equal(json.info.restarts, 2, 'each part count was fitted twice');
   assert.ok(Array.isArray(json.joints) && json.joints.length >= 1);
   assert.ok(Array.isArray(json.points), 'the export carries the canonical points');
   const zipFile = await download(page, '#btn-export-ply');
