@@ -234,12 +234,10 @@ mod cli {
 
     /// `--restarts N` (N ≥ 1) on top of the parsed options.
     fn with_restarts(opts: FitOptions, restarts: Option<usize>) -> Result<FitOptions> {
+        let most = gsart::fit::select::MAX_RESTARTS;
         match restarts {
-            Some(0) => Err(Error::InvalidArgument(
-                "--restarts must be at least 1".into(),
-            )),
-            Some(n) if n > 16 => Err(Error::InvalidArgument(format!(
-                "--restarts {n}: at most 16"
+            Some(n) if n == 0 || n > most => Err(Error::InvalidArgument(format!(
+                "--restarts {n}: expected 1 to {most}"
             ))),
             _ => Ok(FitOptions { restarts, ..opts }),
         }

@@ -214,6 +214,9 @@ pub const SEARCH_MIN_POINTS: usize = 1024;
 /// frames (407–1347 points); below this it has not been tried.
 pub const OCCLUDED_SEARCH_MIN_POINTS: usize = 400;
 
+/// Most fits per candidate part count (`FitOptions::restarts`).
+pub const MAX_RESTARTS: usize = 16;
+
 /// Seed of restart `r` of a fit with seed `seed` (restart 0 is the fit itself).
 pub fn restart_seed(seed: u64, r: usize) -> u64 {
     seed.wrapping_add((r as u64).wrapping_mul(0x1_0000))
@@ -228,7 +231,12 @@ pub fn run_candidate(
     opts: &FitOptions,
     cb: &mut dyn FnMut(&Progress) -> Control,
 ) -> Result<Step1Result> {
-    let restarts = opts.restarts.unwrap_or(prep.sched.restarts).max(1);
+    let restarts = opts.restarts.unwrap_or(prep.sched.restarts);
+    if restarts == 0 || restarts > MAX_RESTARTS {
+        return Err(Error::InvalidArgument(format!(
+            "restarts {restarts}: expected 1 to {MAX_RESTARTS} fits per part count"
+        )));
+    }
     let mut best: Option<Step1Result> = None;
     let (mut secs, mut iterations) = (0.0, 0);
     for r in 0..restarts {
@@ -644,6 +652,14 @@ mod size_rule_tests {
         assert_eq!(best.timings.per_candidate[0].2, a.iterations + b.iterations);
         // Progress ran through both fits: the last report is in the second half.
         assert!(2 * last.0 >= last.1, "{last:?}");
+        // Zero or too many fits are refused, not run.
+        for n in [0, MAX_RESTARTS + 1] {
+            let o = FitOptions {
+                restarts: Some(n),
+                ..opts.clone()
+            };
+            assert!(run_candidate(&prep, 2, &o, &mut |_| Control::Continue).is_err());
+        }
         // One restart is the plain fit.
         assert_eq!(restart_seed(7, 0), 7);
     }
