@@ -42,10 +42,12 @@ pub struct FitOptions {
     /// `Schedule::restarts`). Measured (bench-dev full, fast, end to end, mean of
     /// seeds 0–4): two fits took mean RI 0.882 → 0.888, reconstruction 1.07 → 0.87,
     /// flow 1.11 → 0.93, re-animation 2.86 → 2.57, TED 2.77 → 2.86, for 1.9× the
-    /// time (5.4 → 10.3 s per sequence). Balanced already chooses among six part
-    /// counts: its two ends with three fits each did no better than it (seeds 0–2:
-    /// RI 0.888 vs 0.895, recon 0.83 vs 0.82), so the presets keep one fit and this
-    /// is the user's choice.
+    /// time (5.4 → 10.3 s per sequence); recon and flow were lower on each seed.
+    /// Balanced already chooses among six part counts, and there the lowest Chamfer
+    /// of twelve fits favours over-segmented models: two fits, seeds 0–2, RI 0.895 →
+    /// 0.884, recon 0.82 → 0.83, TED 2.57 → 2.76 (its two ends with three fits each:
+    /// RI 0.888, recon 0.83). So the presets keep one fit and this is the user's
+    /// choice, worth it with fast.
     pub restarts: Option<usize>,
 }
 
