@@ -37,9 +37,12 @@ pub struct FitOptions {
     pub seed: u64,
     /// Frames larger than this are downsampled for the fit.
     pub working_size: usize,
-    /// Step-1 fits per candidate part count, each from its own seed, keeping the
-    /// lowest final Chamfer (`None` = the quality preset's, one; see
-    /// `Schedule::restarts`). Measured (bench-dev full, fast, end to end, mean of
+    /// Step-1 fits per candidate part count, each from its own seed (restart r uses
+    /// `select::restart_seed(seed, r)`), keeping the lowest final Chamfer (`None` =
+    /// one, every preset's). The fit is chaotic in its seed — the warm-up batches
+    /// decide which parts a geometric Gaussian straddles, and that decides which
+    /// symmetric pose the search takes — so another draw may fit clearly better.
+    /// Measured (bench-dev full, fast, end to end, mean of
     /// seeds 0–4): two fits took mean RI 0.882 → 0.888, reconstruction 1.07 → 0.87,
     /// flow 1.11 → 0.93, re-animation 2.86 → 2.57, TED 2.77 → 2.86, for 1.9× the
     /// time (5.4 → 10.3 s per sequence); recon and flow were lower on each seed.

@@ -234,10 +234,10 @@ mod cli {
 
     /// `--restarts N` (N ≥ 1) on top of the parsed options.
     fn with_restarts(opts: FitOptions, restarts: Option<usize>) -> Result<FitOptions> {
-        let most = gsart::fit::select::MAX_RESTARTS;
+        use gsart::fit::select::{restarts_allowed, MAX_RESTARTS};
         match restarts {
-            Some(n) if n == 0 || n > most => Err(Error::InvalidArgument(format!(
-                "--restarts {n}: expected 1 to {most}"
+            Some(n) if !restarts_allowed(n) => Err(Error::InvalidArgument(format!(
+                "--restarts {n}: expected 1 to {MAX_RESTARTS}"
             ))),
             _ => Ok(FitOptions { restarts, ..opts }),
         }

@@ -48,13 +48,6 @@ pub struct Schedule {
     /// 0.85, TED 2.43 vs 2.57, re-animation 2.65 vs 2.51 — differences at the level
     /// of seed noise — for about a fifth less time per candidate.
     pub searched_divisor: usize,
-    /// Fits per candidate part count, each from its own seed (restart r uses
-    /// `select::restart_seed(seed, r)`); the one with the lowest final Chamfer stands
-    /// for that m in the model selection. The whole fit is chaotic in its seed — the
-    /// warm-up batches decide which parts a geometric Gaussian straddles, and that
-    /// decides which symmetric pose the search takes — so a second draw often fits
-    /// clearly better. See `FitOptions::restarts` for the measurements.
-    pub restarts: usize,
 }
 
 impl Schedule {
@@ -92,7 +85,6 @@ impl Schedule {
             emd_n: 128,
             emd_refresh: 4,
             reseg_rounds,
-            restarts: 1,
         }
     }
 

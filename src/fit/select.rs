@@ -217,6 +217,11 @@ pub const OCCLUDED_SEARCH_MIN_POINTS: usize = 400;
 /// Most fits per candidate part count (`FitOptions::restarts`).
 pub const MAX_RESTARTS: usize = 16;
 
+/// Whether `n` fits per candidate part count is allowed (1 to `MAX_RESTARTS`).
+pub fn restarts_allowed(n: usize) -> bool {
+    (1..=MAX_RESTARTS).contains(&n)
+}
+
 /// Seed of restart `r` of a fit with seed `seed` (restart 0 is the fit itself).
 pub fn restart_seed(seed: u64, r: usize) -> u64 {
     seed.wrapping_add((r as u64).wrapping_mul(0x1_0000))
@@ -231,15 +236,13 @@ pub fn run_candidate(
     opts: &FitOptions,
     cb: &mut dyn FnMut(&Progress) -> Control,
 ) -> Result<Step1Result> {
-    let restarts = opts.restarts.unwrap_or(prep.sched.restarts);
-    if restarts == 0 || restarts > MAX_RESTARTS {
+    let restarts = opts.restarts.unwrap_or(1);
+    if !restarts_allowed(restarts) {
         return Err(Error::InvalidArgument(format!(
             "restarts {restarts}: expected 1 to {MAX_RESTARTS} fits per part count"
         )));
     }
-    let mut best: Option<Step1Result> = None;
-    let (mut secs, mut iterations) = (0.0, 0);
-    for r in 0..restarts {
+    let mut fit = |r: usize| {
         let mut report = |p: &Progress| {
             cb(&Progress {
                 iter: r * p.total + p.iter,
@@ -247,18 +250,18 @@ pub fn run_candidate(
                 ..p.clone()
             })
         };
-        let seed = restart_seed(opts.seed, r);
-        let res = fit_once(prep, m, opts, seed, &mut report)?;
+        fit_once(prep, m, opts, restart_seed(opts.seed, r), &mut report)
+    };
+    let mut best = fit(0)?;
+    let (mut secs, mut iterations) = (best.timings.total_s, best.iterations);
+    for r in 1..restarts {
+        let res = fit(r)?;
         secs += res.timings.total_s;
         iterations += res.iterations;
-        if best
-            .as_ref()
-            .is_none_or(|b| res.final_chamfer < b.final_chamfer)
-        {
-            best = Some(res);
+        if res.final_chamfer < best.final_chamfer {
+            best = res;
         }
     }
-    let mut best = best.ok_or_else(|| Error::InvalidArgument("no restart ran".into()))?;
     best.restarts = restarts;
     best.timings = Timings {
         total_s: secs,
