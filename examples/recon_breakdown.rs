@@ -5,7 +5,10 @@
 //! With `--step1`, the poses are the Step-1 Gaussians' instead of the result's (each
 //! part moves with its largest Gaussian), to separate Step 1 from Steps 2–3.
 //!
-//! Usage: `cargo run --release --example recon_breakdown -- RESULT.json SEQ_DIR [--step1]`
+//! With `--rot`, the per-frame columns are the rotation error (degrees) of the main
+//! predicted part's motion instead of the point error.
+//!
+//! Usage: `cargo run --release --example recon_breakdown -- RESULT.json SEQ_DIR [--step1] [--rot]`
 
 use std::path::Path;
 
@@ -36,6 +39,7 @@ fn main() {
     let gl = cloud.labels.unwrap();
     let pred = &result.labels[c];
     let step1 = args.iter().any(|a| a == "--step1");
+    let rot = args.iter().any(|a| a == "--rot");
     let mut poses: Vec<Vec<DMat4>> = (0..result.frames)
         .map(|t| result.poses[t].iter().map(from_row_major).collect())
         .collect();
@@ -93,7 +97,20 @@ fn main() {
         let mean = per.iter().sum::<f64>() / k as f64;
         let contrib = mean * count[g] as f64 / n;
         total += contrib;
-        let pf: Vec<String> = per.iter().map(|v| format!("{v:5.1}")).collect();
+        let pf: Vec<String> = if rot {
+            // rotation error (degrees) of the main predicted part's motion per frame
+            (0..k)
+                .map(|t| {
+                    let pm: DMat4 = poses[t][a];
+                    let gm: DMat4 = gt.poses[t][g] * rigid_inverse(&gt.poses[c][g]);
+                    let r = glam::DMat3::from_mat4(pm).transpose() * glam::DMat3::from_mat4(gm);
+                    let cos = ((r.x_axis.x + r.y_axis.y + r.z_axis.z - 1.0) / 2.0).clamp(-1.0, 1.0);
+                    format!("{:5.0}", cos.acos().to_degrees())
+                })
+                .collect()
+        } else {
+            per.iter().map(|v| format!("{v:5.1}")).collect()
+        };
         println!(
             "{g:7}  {:5.3}  {a:3} ({:4.2})        {mean:7.2}  {contrib:6.2} | {}",
             count[g] as f64 / n,

@@ -229,6 +229,9 @@ pub fn finish(
         // Neither does the ICP polish help there (partial clouds): recon 15.56 vs
         // 15.70 without, flow 17.94 vs 17.48.
         kin_opts.polish = false;
+        // Nor the half-turn repair: a half-turned part's fit to a one-sided cloud says
+        // little (seed 0, fast: recon 14.86 → 15.92, TED 5.0 → 5.6 with it).
+        kin_opts.flips = false;
     }
     let (mut result, kin) = crate::kinematics::build_articulated(
         &points,
@@ -350,6 +353,12 @@ pub fn finish(
         step1.candidates.iter().map(|c| c.0).collect::<Vec<_>>(),
         result.parts
     ));
+    if kin.flips > 0 {
+        notes.push(format!(
+            "{} part poses were turned half a turn to follow their joints (nearly symmetric parts)",
+            kin.flips
+        ));
+    }
     result.info = Some(serde_json::json!({
         "generator": concat!("gsart ", env!("CARGO_PKG_VERSION")),
         "m": step1.m,
@@ -364,6 +373,7 @@ pub fn finish(
         "candidates_timing": step1.timings.per_candidate,
         "kinematics_seconds": kin.timings,
         "relabel": {"changed": relabelled, "seconds": relabel_s},
+        "half_turns": kin.flips,
         "refine": kin.refine,
         "notes": notes,
     }));

@@ -7,6 +7,7 @@
 use glam::{DMat4, DVec3, Vec3};
 use serde::Serialize;
 
+use super::flips::repair_flips;
 use super::merge::{absorb, merge_parts, MergeEvent, MergeOptions};
 use super::observed::{
     keep_faithful_poses, object_size, observed_motion, polish_motions, polish_poses,
@@ -42,6 +43,9 @@ pub struct KinOptions {
     /// the final polish took recon 1.26 → 1.07, flow 1.48 → 1.24; building from the
     /// polished motion then TED 2.86 → 2.57, re-animation 3.17 → 2.92.
     pub polish: bool,
+    /// Repair half-turn flips of nearly symmetric parts against their parents once the
+    /// tree is known (`kinematics::flips`), then build the tree again.
+    pub flips: bool,
 }
 
 impl Default for KinOptions {
@@ -52,6 +56,7 @@ impl Default for KinOptions {
             refine: Some(RefineOptions::default()),
             pose_tolerance: Some(super::observed::AGREE_TOL),
             polish: true,
+            flips: true,
         }
     }
 }
@@ -80,6 +85,8 @@ pub struct KinReport {
     /// (part, frame) poses where the result reports the observed Step-1 motion because
     /// the model's disagreed (see `KinOptions::pose_tolerance`).
     pub poses_replaced: usize,
+    /// (part, frame) motions replaced by their half-turn (`kinematics::flips`).
+    pub flips: usize,
     /// (stage, seconds) from the caller's clock.
     pub timings: Vec<(String, f64)>,
 }
@@ -300,12 +307,13 @@ pub fn build_articulated(
     // Tree and joints; a joint that does not move (after the projection, or after
     // the refinement) absorbs its child into its parent, and the tree is built again.
     let (mut tree_s, mut proj_s, mut refine_s) = (0.0, 0.0, 0.0);
+    let mut flipped = 0;
     let (parts, dist, costs, root, parent, result, residuals, refine_report, observed) = loop {
         // The tree and the joints are built from each part's observed motion, polished
         // against the clouds (`polished_input`), not from its largest Gaussian's pose.
         // Parts too small for either keep the largest Gaussian's pose, so the observed
         // motion is the same whether taken before or after this replacement.
-        let observed = observed_of(points, labels, poses, &merged, canonical);
+        let mut observed = observed_of(points, labels, poses, &merged, canonical);
         if opts.polish {
             merged.poses = polished_input(observed.clone(), points, labels, &merged, canonical);
         }
@@ -316,10 +324,33 @@ pub fn build_articulated(
             .collect();
         let parts = merged.parts;
         let dist = pair_distances(points, &new_labels, parts, canonical);
-        let extents = part_extents(points, &new_labels, &merged.poses, canonical);
-        let costs = pair_costs(&merged.poses, &dist, canonical, &extents);
-        let root = least_motion_root(&merged.poses, parts);
-        let parent = spanning_tree(&costs, root);
+        let mut extents = part_extents(points, &new_labels, &merged.poses, canonical);
+        let mut costs = pair_costs(&merged.poses, &dist, canonical, &extents);
+        let mut root = least_motion_root(&merged.poses, parts);
+        let mut parent = spanning_tree(&costs, root);
+        if opts.flips {
+            let mut motions = motions_from_canonical(&merged.poses, canonical);
+            let flips = repair_flips(
+                &mut motions,
+                &parent,
+                canonical,
+                &points[canonical],
+                &new_labels[canonical],
+                points,
+                &extents,
+            );
+            if !flips.is_empty() {
+                for f in &flips {
+                    observed[f.frame][f.part] *= f.flip;
+                }
+                merged.poses = motions;
+                extents = part_extents(points, &new_labels, &merged.poses, canonical);
+                costs = pair_costs(&merged.poses, &dist, canonical, &extents);
+                root = least_motion_root(&merged.poses, parts);
+                parent = spanning_tree(&costs, root);
+            }
+            flipped = flips.len();
+        }
         let tb = clock();
         progress_to(progress, Stage::Tree, 2, 3, vec![])?;
         let (mut result, residuals) = project_joints(
@@ -407,6 +438,7 @@ pub fn build_articulated(
         joints: residuals,
         refine: refine_report,
         poses_replaced,
+        flips: flipped,
         timings,
     };
     Ok((result, report))

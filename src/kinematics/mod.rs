@@ -3,6 +3,7 @@
 
 pub mod build;
 pub mod chain;
+pub mod flips;
 pub mod merge;
 pub mod observed;
 pub mod project;

@@ -228,7 +228,7 @@ pub fn polish_motions(
 }
 
 /// The points of each of `parts` parts (labels out of range are skipped).
-fn points_by_part(points: &[Vec3], labels: &[u32], parts: usize) -> Vec<Vec<DVec3>> {
+pub(crate) fn points_by_part(points: &[Vec3], labels: &[u32], parts: usize) -> Vec<Vec<DVec3>> {
     let mut by_part: Vec<Vec<DVec3>> = vec![Vec::new(); parts];
     for (x, &l) in points.iter().zip(labels) {
         if let Some(v) = by_part.get_mut(l as usize) {
@@ -240,7 +240,13 @@ fn points_by_part(points: &[Vec3], labels: &[u32], parts: usize) -> Vec<Vec<DVec
 
 /// Mean of the `keep` fraction of smallest squared distances from the moved points to
 /// the cloud.
-fn trimmed_fit(grid: &Grid, pts: &[DVec3], mo: &DMat4, keep: f64, buf: &mut Vec<f64>) -> f64 {
+pub(crate) fn trimmed_fit(
+    grid: &Grid,
+    pts: &[DVec3],
+    mo: &DMat4,
+    keep: f64,
+    buf: &mut Vec<f64>,
+) -> f64 {
     buf.clear();
     buf.extend(
         pts.iter().map(|x| {

@@ -164,7 +164,7 @@ pub fn log_rotation(r: &DMat3) -> DVec3 {
 }
 
 /// Angle θ about unit `axis` whose rotation is closest (Frobenius) to `r`.
-fn project_angle(axis: DVec3, r: &DMat3) -> f64 {
+pub(crate) fn project_angle(axis: DVec3, r: &DMat3) -> f64 {
     // R(θ) = I + sinθ K + (1−cosθ) K²; maximise tr(R(θ)ᵀ r) = const + α sinθ − β cosθ.
     let k = DMat3::from_cols(
         DVec3::new(0.0, axis.z, -axis.y),
@@ -202,7 +202,7 @@ pub fn unwrap_angles(mut a: Vec<f64>) -> Vec<f64> {
 
 /// Point p minimising Σ‖(I − Rₖ) p − tₖ‖², taking the component of every
 /// unconstrained direction (at least the axis) from `reference`.
-fn fit_pivot(rs: &[DMat3], ts: &[DVec3], reference: DVec3) -> DVec3 {
+pub(crate) fn fit_pivot(rs: &[DMat3], ts: &[DVec3], reference: DVec3) -> DVec3 {
     let mut m = Matrix3::<f64>::zeros();
     let mut b = Vector3::<f64>::zeros();
     for (r, t) in rs.iter().zip(ts) {
