@@ -90,6 +90,9 @@ fn half_turns(pts: &[DVec3]) -> Vec<DMat4> {
 /// A screw proposed by one relative motion: (type, axis, pivot).
 type Hypothesis = (JointType, DVec3, DVec3);
 
+/// Screws proposed by relative motion `q`: the hinge about its rotation axis (through
+/// the point of it nearest `reference`) when it turns by more than `MIN_TURN`, and the
+/// slide along its translation when that exceeds `MIN_SLIDE`.
 fn hypotheses(q: &DMat4, reference: DVec3, out: &mut Vec<Hypothesis>) {
     let r = DMat3::from_mat4(*q);
     let t = q.w_axis.truncate();
