@@ -324,10 +324,15 @@ pub fn build_articulated(
             .collect();
         let parts = merged.parts;
         let dist = pair_distances(points, &new_labels, parts, canonical);
-        let mut extents = part_extents(points, &new_labels, &merged.poses, canonical);
-        let mut costs = pair_costs(&merged.poses, &dist, canonical, &extents);
-        let mut root = least_motion_root(&merged.poses, parts);
-        let mut parent = spanning_tree(&costs, root);
+        // Extents, pair costs, root and tree from the parts' motions.
+        let tree_of = |motions: &[Vec<DMat4>]| {
+            let extents = part_extents(points, &new_labels, motions, canonical);
+            let costs = pair_costs(motions, &dist, canonical, &extents);
+            let root = least_motion_root(motions, parts);
+            let parent = spanning_tree(&costs, root);
+            (extents, costs, root, parent)
+        };
+        let (mut extents, mut costs, mut root, mut parent) = tree_of(&merged.poses);
         if opts.flips {
             let mut motions = motions_from_canonical(&merged.poses, canonical);
             let flips = repair_flips(
@@ -344,10 +349,7 @@ pub fn build_articulated(
                     observed[f.frame][f.part] *= f.flip;
                 }
                 merged.poses = motions;
-                extents = part_extents(points, &new_labels, &merged.poses, canonical);
-                costs = pair_costs(&merged.poses, &dist, canonical, &extents);
-                root = least_motion_root(&merged.poses, parts);
-                parent = spanning_tree(&costs, root);
+                (extents, costs, root, parent) = tree_of(&merged.poses);
             }
             flipped = flips.len();
         }
