@@ -229,7 +229,7 @@ pub fn finish(
         // Neither does the ICP polish help there (partial clouds): recon 15.56 vs
         // 15.70 without, flow 17.94 vs 17.48.
         kin_opts.polish = false;
-        // Nor the half-turn repair: a half-turned part's fit to a one-sided cloud says
+        // Nor the symmetry repair: a half-turned part's fit to a one-sided cloud says
         // little (seed 0, fast: recon 14.86 → 15.92, TED 5.0 → 5.6 with it).
         kin_opts.flips = false;
     }
@@ -355,7 +355,7 @@ pub fn finish(
     ));
     if kin.flips > 0 {
         notes.push(format!(
-            "{} part poses were turned half a turn to follow their joints (nearly symmetric parts)",
+            "{} part poses were turned about an axis of their (nearly symmetric) part to follow their joints",
             kin.flips
         ));
     }
@@ -373,7 +373,7 @@ pub fn finish(
         "candidates_timing": step1.timings.per_candidate,
         "kinematics_seconds": kin.timings,
         "relabel": {"changed": relabelled, "seconds": relabel_s},
-        "half_turns": kin.flips,
+        "symmetry_turns": kin.flips,
         "refine": kin.refine,
         "notes": notes,
     }));

@@ -97,6 +97,13 @@ fn gt_input_recovers_tree_and_joints() {
         };
         let (res, rep, secs) = run(&seq, &opts);
         let e = check(&seq, &res, &rep, true, &mut failures);
+        // Exact true motions need no repair (`kinematics::flips`).
+        if rep.flips != 0 {
+            failures.push(format!(
+                "{}: {} turns repaired on true motions",
+                seq.name, rep.flips
+            ));
+        }
         eprintln!(
             "{:<18} projection: parts {:>2}/{:<2} root {:>2} tree-mismatch {} type-errors {} max-axis {:.4}° max-pivot {:.5} spacing {:.4} merges {} ({secs:.2}s)",
             seq.name, rep.parts, seq.gt.num_parts, e.root, e.tree_mismatch, e.type_errors,
@@ -113,13 +120,9 @@ fn gt_input_recovers_tree_and_joints() {
         }
         // With refinement (Chamfer against the observed clouds).
         let (res, rep, secs) = run(&seq, &KinOptions::default());
-        // True motions need no half-turn repair (`kinematics::flips`).
-        if rep.flips != 0 {
-            failures.push(format!(
-                "{}: {} half-turns on true motions",
-                seq.name, rep.flips
-            ));
-        }
+        // With the polish, the repair may turn a symmetric link back about its axis
+        // where the ICP polish spun it (a flat direction of its fit: laikago, solo12
+        // and talos, 13–22°); the poses must still end up on the truth (below).
         // The reported poses are not all the refined chain's: where the refinement
         // moved a part off its observed motion (the true one here) and the data agree,
         // the observed motion is reported, then every pose is polished against the

@@ -43,8 +43,9 @@ pub struct KinOptions {
     /// the final polish took recon 1.26 → 1.07, flow 1.48 → 1.24; building from the
     /// polished motion then TED 2.86 → 2.57, re-animation 3.17 → 2.92.
     pub polish: bool,
-    /// Repair half-turn flips of nearly symmetric parts against their parents once the
-    /// tree is known (`kinematics::flips`), then build the tree again.
+    /// Repair the poses of nearly symmetric parts (half-turns; turns about an axis of
+    /// rotational symmetry) against their parents once the tree is known
+    /// (`kinematics::flips`), then build the tree again.
     pub flips: bool,
 }
 
@@ -85,7 +86,8 @@ pub struct KinReport {
     /// (part, frame) poses where the result reports the observed Step-1 motion because
     /// the model's disagreed (see `KinOptions::pose_tolerance`).
     pub poses_replaced: usize,
-    /// (part, frame) motions replaced by their half-turn (`kinematics::flips`).
+    /// (part, frame) motions replaced by a half-turn or a turn about a symmetry axis
+    /// (`kinematics::flips`), over all repair rounds.
     pub flips: usize,
     /// (stage, seconds) from the caller's clock.
     pub timings: Vec<(String, f64)>,
@@ -186,6 +188,9 @@ const STILL_SLIDE: f64 = 0.02;
 /// split in two by Step 1, had a 0.10-rad "hinge" at 0.05 and stayed split: RI 0.735),
 /// below the smallest real hinge range on bench-dev (0.43 rad).
 const STILL_TURN: f64 = 0.15;
+/// Rounds of symmetry repair and tree rebuilding (`KinOptions::flips`); each stops
+/// the rounds when it repairs nothing or leaves the tree as it was.
+const FLIP_PASSES: usize = 3;
 
 /// Joints of a projected chain that do not move in any frame, as (child, parent): two
 /// rigidly joined pieces whose pose noise kept L_merge above its threshold (bench-dev
@@ -334,24 +339,34 @@ pub fn build_articulated(
         };
         let (mut extents, mut costs, mut root, mut parent) = tree_of(&merged.poses);
         if opts.flips {
-            let mut motions = motions_from_canonical(&merged.poses, canonical);
-            let flips = repair_flips(
-                &mut motions,
-                &parent,
-                canonical,
-                &points[canonical],
-                &new_labels[canonical],
-                points,
-                &extents,
-            );
-            if !flips.is_empty() {
+            flipped = 0;
+            // A repair can change the tree, and a part repaired against a wrong
+            // parent is then judged again against its new one.
+            for _ in 0..FLIP_PASSES {
+                let mut motions = motions_from_canonical(&merged.poses, canonical);
+                let flips = repair_flips(
+                    &mut motions,
+                    &parent,
+                    canonical,
+                    &points[canonical],
+                    &new_labels[canonical],
+                    points,
+                    &extents,
+                );
+                if flips.is_empty() {
+                    break;
+                }
                 for f in &flips {
                     observed[f.frame][f.part] *= f.flip;
                 }
                 merged.poses = motions;
+                flipped += flips.len();
+                let before = parent.clone();
                 (extents, costs, root, parent) = tree_of(&merged.poses);
+                if parent == before {
+                    break;
+                }
             }
-            flipped = flips.len();
         }
         let tb = clock();
         progress_to(progress, Stage::Tree, 2, 3, vec![])?;

@@ -1,25 +1,31 @@
-//! Half-turn flips of nearly symmetric parts (an addition to Step 2).
+//! Half-turn flips and spins of nearly symmetric parts (an addition to Step 2).
 //!
 //! Step 1's pose search can put a nearly symmetric link (a capsule-like forearm) half a
 //! turn about one of its own axes in some frames: its points still land on its surface,
 //! so the clouds barely tell the two poses apart, but the point correspondences — and
 //! with them reconstruction and flow — are wrong, and the relative motion to its parent
 //! no longer has one degree of freedom (bench-dev so101, seed 0: the lower arm 180° off
-//! in frames 3–8, its hinge axis then 88° off). The kinematic chain tells the two poses
-//! apart: relative to its parent, a link turns (or slides) along one fixed screw.
+//! in frames 3–8, its hinge axis then 88° off). A link symmetric about an axis (a
+//! capsule, a cylinder: the procedural quadruped's shanks) can take any turn about it
+//! (quadruped seed 2: shanks up to 160° off, hinge axes up to 84° off). The kinematic
+//! chain tells the poses apart: relative to its parent, a link turns (or slides) along
+//! one fixed screw.
 //!
 //! Walking the tree from the root, each child's motion at each frame may be replaced by
 //! its half-turn about one of its principal axes (through its centroid at the canonical
 //! frame), polished by trimmed ICP as the reported poses are, when that pose fits the
-//! frame's cloud about as well (`DATA_SLACK`). Which frames take it is decided by a consensus screw: every frame's
-//! current relative motion to the parent proposes a screw, each proposal is scored over
-//! all frames with the best variant per frame (the worst `OUTLIER_FRACTION` of frames
-//! left out, as in the screw fit), and under the best one a frame switches when its
-//! 1-DOF residual drops `SWITCH_GAIN`-fold from above `MIN_SWITCH_RESIDUAL`. The
-//! switches are kept only when the child's full screw fit (`screw::fit_screw`) improves
-//! `KEEP_GAIN`-fold. Parents are repaired before their children, so a child is judged
-//! against its parent's repaired motion. Measured effects and the variants tried are in
-//! the README ("Half-turn repair").
+//! frame's cloud about as well (`DATA_SLACK`); and, for a principal axis the part looks
+//! the same about (`spin_axes`), by its turn about that axis that follows a given screw
+//! (`spin_for`). Which frames take which is decided by a consensus screw: every frame's
+//! current relative motion to the parent proposes a screw, and so does the cone traced
+//! by a symmetry axis (`cone_hinge`, which its turns do not change); each proposal is
+//! scored over all frames with the best variant per frame (the worst
+//! `OUTLIER_FRACTION` of frames left out, as in the screw fit), and under the best one
+//! a frame switches when its 1-DOF residual drops `SWITCH_GAIN`-fold from above
+//! `MIN_SWITCH_RESIDUAL`. The switches are kept only when the child's full screw fit
+//! (`screw::fit_screw`) improves `KEEP_GAIN`-fold. Parents are repaired before their
+//! children, so a child is judged against its parent's repaired motion. Measured
+//! effects and the variants tried are in the README ("Half-turn repair").
 
 use glam::{DMat3, DMat4, DVec3, Vec3};
 use nalgebra::{Matrix3, SymmetricEigen};
@@ -47,6 +53,15 @@ pub const SWITCH_GAIN: f64 = 4.0;
 pub const MIN_SWITCH_RESIDUAL: f64 = 0.1;
 /// The switches are kept when the child's L_1DOF drops this many times.
 pub const KEEP_GAIN: f64 = 1.2;
+/// Turns (degrees) a part must look the same under to count as symmetric about an
+/// axis (a capsule, a cylinder): three, so a part with a few-fold symmetry does not.
+const SPIN_PROBES: [f64; 3] = [40.0, 90.0, 135.0];
+/// A part turned about a symmetry axis may fit itself this many times worse than it
+/// fits the frames' clouds (self-fits of capsule-like links are 1–2.5 times their
+/// cloud fits, other axes' 4–40 times on the procedural quadruped).
+const SPIN_SLACK: f64 = 3.0;
+/// Least spread (second eigenvalue of the axis images' scatter) for a cone fit.
+const CONE_SPREAD: f64 = 1e-3;
 /// Parts with fewer canonical points are left alone (their axes are noise).
 const MIN_POINTS: usize = 24;
 /// Rotation (radians) below which a relative motion proposes no hinge axis.
@@ -59,12 +74,12 @@ const MIN_SLIDE: f64 = 1e-3;
 pub struct Flip {
     pub frame: usize,
     pub part: usize,
-    /// The half-turn, a rigid map of the canonical frame.
+    /// The half-turn or turn about a symmetry axis, a rigid map of the canonical frame.
     pub flip: DMat4,
 }
 
-/// Half-turns about the three principal axes of `pts` through their centroid.
-fn half_turns(pts: &[DVec3]) -> Vec<DMat4> {
+/// Centroid and unit principal axes of `pts`.
+fn principal_axes(pts: &[DVec3]) -> (DVec3, [DVec3; 3]) {
     let n = pts.len() as f64;
     let c = pts.iter().copied().sum::<DVec3>() / n;
     let mut m = Matrix3::<f64>::zeros();
@@ -77,15 +92,109 @@ fn half_turns(pts: &[DVec3]) -> Vec<DMat4> {
         }
     }
     let e = SymmetricEigen::new(m);
-    (0..3)
-        .map(|k| {
-            let v = e.eigenvectors.column(k);
-            let axis = DVec3::new(v[0], v[1], v[2]).normalize_or_zero();
-            let r = DMat3::from_axis_angle(axis, std::f64::consts::PI);
-            rigid(r, c - r * c)
+    let axis = |k: usize| {
+        let v = e.eigenvectors.column(k);
+        DVec3::new(v[0], v[1], v[2]).normalize_or_zero()
+    };
+    (c, [axis(0), axis(1), axis(2)])
+}
+
+/// The turn by `angle` about the line through `c` along unit `axis`.
+fn turn_about(axis: DVec3, angle: f64, c: DVec3) -> DMat4 {
+    let r = DMat3::from_axis_angle(axis, angle);
+    rigid(r, c - r * c)
+}
+
+/// Half-turns about three principal axes through the centroid `c`.
+fn half_turns(c: DVec3, axes: &[DVec3; 3]) -> Vec<DMat4> {
+    axes.iter()
+        .map(|&a| turn_about(a, std::f64::consts::PI, c))
+        .collect()
+}
+
+/// Principal axes about which `pts` look the same at any turn: turned by each of
+/// `SPIN_PROBES` they fit themselves (trimmed mean squared distance) within
+/// `SPIN_SLACK` of `noise`, the part's typical fit to the frames' clouds.
+fn spin_axes(pts: &[DVec3], c: DVec3, axes: &[DVec3; 3], noise: f64) -> Vec<DVec3> {
+    let own = Grid::new(&pts.iter().map(|p| p.as_vec3()).collect::<Vec<_>>());
+    let mut buf = Vec::new();
+    axes.iter()
+        .copied()
+        .filter(|&a| {
+            SPIN_PROBES.iter().all(|&deg: &f64| {
+                let s = turn_about(a, deg.to_radians(), c);
+                trimmed_fit(&own, pts, &s, POLISH_KEEP, &mut buf) <= SPIN_SLACK * noise
+            })
         })
         .collect()
 }
+
+/// The hinge that carries a part's symmetry axis `a` (through `c`) as the relative
+/// motions `rel` do, whatever the part's turn about that axis: the images `R a` lie
+/// on a cone about the hinge axis, and the centroid's images (which the turn does
+/// not move) fix the pivot. None when the images do not spread around a cone.
+fn cone_hinge(rel: &[DMat4], a: DVec3, c: DVec3, reference: DVec3) -> Option<Hypothesis> {
+    let b: Vec<DVec3> = rel.iter().map(|q| DMat3::from_mat4(*q) * a).collect();
+    if b.iter().all(|x| x.angle_between(a) < MIN_TURN) {
+        return None;
+    }
+    let mean = b.iter().copied().sum::<DVec3>() / b.len() as f64;
+    let mut m = Matrix3::<f64>::zeros();
+    for x in &b {
+        let d = *x - mean;
+        for i in 0..3 {
+            for j in 0..3 {
+                m[(i, j)] += d[i] * d[j];
+            }
+        }
+    }
+    let e = SymmetricEigen::new(m);
+    let mut idx = [0usize, 1, 2];
+    idx.sort_by(|&i, &j| e.eigenvalues[i].total_cmp(&e.eigenvalues[j]));
+    // The images must span a plane (a circle), not a line (two directions only).
+    if e.eigenvalues[idx[1]] < CONE_SPREAD {
+        return None;
+    }
+    let v = e.eigenvectors.column(idx[0]);
+    let u = DVec3::new(v[0], v[1], v[2]).normalize_or_zero();
+    let (mut rs, mut ts) = (Vec::new(), Vec::new());
+    for (q, bt) in rel.iter().zip(&b) {
+        let r = DMat3::from_axis_angle(u, cone_angle(u, a, *bt)?);
+        rs.push(r);
+        ts.push(q.transform_point3(c) - r * c);
+    }
+    Some((JointType::Revolute, u, fit_pivot(&rs, &ts, reference)))
+}
+
+/// The turn about unit `u` taking `a`'s component across `u` to `b`'s; None when
+/// either lies (almost) along `u`.
+fn cone_angle(u: DVec3, a: DVec3, b: DVec3) -> Option<f64> {
+    let (pa, pb) = (a - a.dot(u) * u, b - b.dot(u) * u);
+    if pa.length() < 1e-3 || pb.length() < 1e-3 {
+        return None;
+    }
+    Some(u.dot(pa.cross(pb)).atan2(pa.dot(pb)))
+}
+
+/// The turn about the symmetry axis `a` (through `c`) that brings relative motion
+/// `q` closest to the screw `h`: the state is read off the axis image `R a`, which
+/// the turn does not change. None when the screw cannot tell (its axis along `a`).
+fn spin_for(q: &DMat4, (jt, axis, _): Hypothesis, a: DVec3, c: DVec3) -> Option<DMat4> {
+    let rq = DMat3::from_mat4(*q);
+    let target = match jt {
+        JointType::Revolute => DMat3::from_axis_angle(axis, cone_angle(axis, a, rq * a)?),
+        JointType::Prismatic => DMat3::IDENTITY,
+    };
+    Some(turn_about(
+        a,
+        project_angle(a, &(rq.transpose() * target)),
+        c,
+    ))
+}
+
+/// A frame's pose of a part: (the half-turn or spin applied, if any; the motion; the
+/// relative motion to the parent).
+type Variant = (Option<DMat4>, DMat4, DMat4);
 
 /// A screw proposed by one relative motion: (type, axis, pivot).
 type Hypothesis = (JointType, DVec3, DVec3);
@@ -122,7 +231,7 @@ fn trimmed_sum(res: &mut [f64]) -> f64 {
     res[..res.len() - drop].iter().sum()
 }
 
-/// Repairs half-turn flips in `motions[t][p]` (frame `canonical` → t, at least two
+/// Repairs half-turn flips and spins (module doc) in `motions[t][p]` (frame `canonical` → t, at least two
 /// frames), walking the tree `parent` from its root. `points`/`labels`: the canonical
 /// frame's points and their parts; `frames[t]`: every frame's cloud; `extents[p]`: the
 /// parts' centroids and radii (screw fits). Returns the replaced motions.
@@ -153,9 +262,12 @@ pub fn repair_flips(
         if pts.len() < MIN_POINTS || extents.len() <= b {
             continue;
         }
-        let turns = half_turns(pts);
-        // Per frame: (half-turn or None, motion, relative motion to the parent).
-        let mut variants: Vec<Vec<(Option<DMat4>, DMat4, DMat4)>> = Vec::with_capacity(k);
+        let (c, axes) = principal_axes(pts);
+        let turns = half_turns(c, &axes);
+        // Per frame: (half-turn or None, motion, relative motion to the parent), and
+        // the current motion's fit to the frame's cloud.
+        let mut variants: Vec<Vec<Variant>> = Vec::with_capacity(k);
+        let mut fits = vec![f64::INFINITY; k];
         for (t, frame) in motions.iter().enumerate() {
             let cur = frame[b];
             let inv_a = rigid_inverse(&frame[a]);
@@ -164,6 +276,7 @@ pub fn repair_flips(
                 (grids.get(t).and_then(Option::as_ref), frames.get(t))
             {
                 let fit_now = trimmed_fit(grid, pts, &cur, POLISH_KEEP, &mut buf);
+                fits[t] = fit_now;
                 for f in &turns {
                     let start = cur * *f;
                     let from = (DMat3::from_mat4(start), start.w_axis.truncate());
@@ -184,26 +297,62 @@ pub fn repair_flips(
             }
             variants.push(v);
         }
-        if variants.iter().all(|v| v.len() == 1) {
+        let mut measured: Vec<f64> = fits.iter().copied().filter(|f| f.is_finite()).collect();
+        let spins = if measured.is_empty() {
+            Vec::new()
+        } else {
+            let mid = measured.len() / 2;
+            let noise = *measured
+                .select_nth_unstable_by(mid, |x, y| x.total_cmp(y))
+                .1;
+            spin_axes(pts, c, &axes, noise)
+        };
+        if spins.is_empty() && variants.iter().all(|v| v.len() == 1) {
             continue;
         }
         let reference = extents[b].centre;
         let mut hyps = Vec::new();
         // Only current motions propose screws: a half-turned one would propose the
         // half-turn itself as the joint's motion (a symmetric panda finger "hinged"
-        // half a turn in one frame explains that frame exactly).
+        // half a turn in one frame explains that frame exactly). A part symmetric
+        // about an axis also proposes the hinge its axis follows.
         for (t, v) in variants.iter().enumerate() {
             if t != canonical {
                 hypotheses(&v[0].2, reference, &mut hyps);
             }
         }
-        let mut res = Vec::with_capacity(k);
-        let score = |h: Hypothesis, res: &mut Vec<f64>| {
+        let current: Vec<DMat4> = variants.iter().map(|v| v[0].2).collect();
+        hyps.extend(
+            spins
+                .iter()
+                .filter_map(|&s| cone_hinge(&current, s, c, reference)),
+        );
+        // A frame's candidates under screw `h`: its half-turns, and its turn about
+        // each symmetry axis that follows `h` (when it still fits the cloud).
+        let candidates = |t: usize, h: Hypothesis, out: &mut Vec<Variant>, buf: &mut Vec<f64>| {
+            out.clear();
+            out.extend_from_slice(&variants[t]);
+            let (cur, rel) = (variants[t][0].1, variants[t][0].2);
+            for &s in &spins {
+                if let Some(f) = spin_for(&rel, h, s, c) {
+                    let mo = cur * f;
+                    let fits_cloud = grids[t].as_ref().is_some_and(|g| {
+                        trimmed_fit(g, pts, &mo, POLISH_KEEP, buf) <= DATA_SLACK * fits[t]
+                    });
+                    if fits_cloud {
+                        out.push((Some(f), mo, rel * f));
+                    }
+                }
+            }
+        };
+        let (mut res, mut cand) = (Vec::with_capacity(k), Vec::new());
+        let mut score = |h: Hypothesis, res: &mut Vec<f64>| {
             res.clear();
-            for (t, v) in variants.iter().enumerate() {
+            for t in 0..k {
                 if t != canonical {
+                    candidates(t, h, &mut cand, &mut buf);
                     res.push(
-                        v.iter()
+                        cand.iter()
                             .map(|x| residual(&x.2, h))
                             .fold(f64::INFINITY, f64::min),
                     );
@@ -220,39 +369,35 @@ pub fn repair_flips(
             continue;
         };
         // Each frame's variant under the consensus screw.
-        let choice: Vec<usize> = variants
-            .iter()
-            .map(|v| {
-                let r: Vec<f64> = v.iter().map(|x| residual(&x.2, best)).collect();
+        let mut cand = Vec::new();
+        let chosen: Vec<Variant> = (0..k)
+            .map(|t| {
+                candidates(t, best, &mut cand, &mut buf);
+                let r: Vec<f64> = cand.iter().map(|x| residual(&x.2, best)).collect();
                 let (j, rj) = r
                     .iter()
                     .enumerate()
                     .min_by(|x, y| x.1.total_cmp(y.1))
                     .map_or((0, 0.0), |(j, &rj)| (j, rj));
-                if j > 0 && SWITCH_GAIN * rj < r[0] && r[0] > MIN_SWITCH_RESIDUAL {
-                    j
+                if t != canonical && j > 0 && SWITCH_GAIN * rj < r[0] && r[0] > MIN_SWITCH_RESIDUAL
+                {
+                    cand[j]
                 } else {
-                    0
+                    cand[0]
                 }
             })
             .collect();
-        if choice.iter().all(|&j| j == 0) {
+        if chosen.iter().all(|x| x.0.is_none()) {
             continue;
         }
-        let rel = |pick: &dyn Fn(usize) -> usize| -> Vec<DMat4> {
-            variants
-                .iter()
-                .enumerate()
-                .map(|(t, v)| v[pick(t)].2)
-                .collect()
-        };
-        let before = fit_screw(&rel(&|_| 0), extents[b]).loss;
-        let after = fit_screw(&rel(&|t| choice[t]), extents[b]).loss;
+        let before = fit_screw(&current, extents[b]).loss;
+        let after_rel: Vec<DMat4> = chosen.iter().map(|x| x.2).collect();
+        let after = fit_screw(&after_rel, extents[b]).loss;
         if KEEP_GAIN * after >= before {
             continue;
         }
-        for (t, &j) in choice.iter().enumerate() {
-            if let (true, (Some(f), mo, _)) = (j > 0, variants[t][j]) {
+        for (t, x) in chosen.iter().enumerate() {
+            if let (Some(f), mo, _) = *x {
                 motions[t][b] = mo;
                 flips.push(Flip {
                     frame: t,
@@ -277,6 +422,14 @@ mod tests {
     /// A base box and a rod hinged on it; the rod has a small knob so it is only
     /// nearly symmetric about its long axis.
     fn scene() -> (Vec<Vec3>, Vec<u32>) {
+        scene_sampled(None)
+    }
+
+    /// `scene` with the rod's points drawn at random (`seed`; none: on a regular grid),
+    /// as an independent sample of the same surface.
+    fn scene_sampled(seed: Option<u64>) -> (Vec<Vec3>, Vec<u32>) {
+        use rand::{Rng, SeedableRng};
+        let mut rng = seed.map(rand::rngs::SmallRng::seed_from_u64);
         let mut pts = Vec::new();
         let mut labels = Vec::new();
         for i in 0..10 {
@@ -290,12 +443,14 @@ mod tests {
         // Rod along +z from (0, 0, 0.12), radius 0.03, length 0.5.
         for i in 0..40 {
             for j in 0..12 {
-                let a = j as f32 * std::f32::consts::TAU / 12.0;
-                pts.push(Vec3::new(
-                    0.03 * a.cos(),
-                    0.03 * a.sin(),
-                    0.12 + i as f32 * 0.0125,
-                ));
+                let (a, z) = match rng.as_mut() {
+                    Some(r) => (
+                        r.random::<f32>() * std::f32::consts::TAU,
+                        r.random::<f32>() * 0.4875,
+                    ),
+                    None => (j as f32 * std::f32::consts::TAU / 12.0, i as f32 * 0.0125),
+                };
+                pts.push(Vec3::new(0.03 * a.cos(), 0.03 * a.sin(), 0.12 + z));
                 labels.push(1);
             }
         }
@@ -306,15 +461,13 @@ mod tests {
         (pts, labels)
     }
 
-    #[test]
-    fn a_half_turned_link_is_put_back_on_its_hinge() {
-        let (pts, labels) = scene();
-        let hinge = |q: f64| turn(DVec3::Y, q, DVec3::new(0.0, 0.0, 0.12));
-        let states = [0.0, 0.3, 0.6, 0.9, 1.1, 0.8, 0.5, 0.2];
-        let truth: Vec<DMat4> = states.iter().map(|&q| hinge(q)).collect();
-        let frames: Vec<Vec<Vec3>> = truth
+    /// Frame `t`'s cloud: `sample(t)` with the rod moved by `truth[t]`.
+    fn posed(truth: &[DMat4], sample: impl Fn(usize) -> (Vec<Vec3>, Vec<u32>)) -> Vec<Vec<Vec3>> {
+        truth
             .iter()
-            .map(|m| {
+            .enumerate()
+            .map(|(t, m)| {
+                let (pts, labels) = sample(t);
                 pts.iter()
                     .zip(&labels)
                     .map(|(x, &l)| {
@@ -326,7 +479,38 @@ mod tests {
                     })
                     .collect()
             })
-            .collect();
+            .collect()
+    }
+
+    /// Every frame's rod motion within 0.02 (largest matrix entry) of the truth.
+    fn assert_on_truth(motions: &[Vec<DMat4>], truth: &[DMat4]) {
+        for (t, m) in truth.iter().enumerate() {
+            let err = (motions[t][1] - *m)
+                .to_cols_array()
+                .iter()
+                .fold(0.0f64, |a, v| a.max(v.abs()));
+            assert!(err < 0.02, "frame {t}: {err}");
+        }
+    }
+
+    /// The base's and the rod's extents for the screw fits.
+    fn rod_extents() -> Vec<PartExtent> {
+        vec![
+            PartExtent::default(),
+            PartExtent {
+                centre: DVec3::new(0.0, 0.0, 0.37),
+                radius: 0.15,
+            },
+        ]
+    }
+
+    #[test]
+    fn a_half_turned_link_is_put_back_on_its_hinge() {
+        let (pts, labels) = scene();
+        let hinge = |q: f64| turn(DVec3::Y, q, DVec3::new(0.0, 0.0, 0.12));
+        let states = [0.0, 0.3, 0.6, 0.9, 1.1, 0.8, 0.5, 0.2];
+        let truth: Vec<DMat4> = states.iter().map(|&q| hinge(q)).collect();
+        let frames = posed(&truth, |_| (pts.clone(), labels.clone()));
         // Frames 3–6 flipped half a turn about the rod's own axis.
         let spin = turn(DVec3::Z, std::f64::consts::PI, DVec3::ZERO);
         let mut motions: Vec<Vec<DMat4>> = truth
@@ -337,29 +521,61 @@ mod tests {
                 vec![DMat4::IDENTITY, m]
             })
             .collect();
-        let extents = vec![
-            PartExtent::default(),
-            PartExtent {
-                centre: DVec3::new(0.0, 0.0, 0.37),
-                radius: 0.15,
-            },
-        ];
+        let extents = rod_extents();
         let flips = repair_flips(&mut motions, &[-1, 0], 0, &pts, &labels, &frames, &extents);
         let mut fixed: Vec<usize> = flips.iter().map(|f| f.frame).collect();
         fixed.sort_unstable();
         assert_eq!(fixed, vec![3, 4, 5, 6]);
-        for (t, m) in truth.iter().enumerate() {
-            let err = (motions[t][1] - *m)
-                .to_cols_array()
-                .iter()
-                .fold(0.0f64, |a, v| a.max(v.abs()));
-            assert!(err < 0.02, "frame {t}: {err}");
-        }
+        assert_on_truth(&motions, &truth);
         // Motions that already follow the hinge are left alone.
         let before = motions.clone();
         assert!(
             repair_flips(&mut motions, &[-1, 0], 0, &pts, &labels, &frames, &extents).is_empty()
         );
         assert_eq!(motions, before);
+    }
+
+    #[test]
+    fn a_spun_rod_is_turned_back_onto_its_hinge() {
+        // The rod (nearly symmetric: its knob is a tenth of a percent of its points)
+        // turned about its own axis by an arbitrary angle in every frame: only the
+        // hinge tells the turns apart.
+        let (pts, labels) = scene_sampled(Some(100));
+        let hinge = |q: f64| turn(DVec3::Y, q, DVec3::new(0.0, 0.0, 0.12));
+        let states = [0.0, 0.3, 0.6, 0.9, 1.1, 0.8, 0.5, 0.2];
+        let spins = [0.0, 1.0, -2.0, 2.8, 0.5, -1.2, 1.7, -0.6];
+        let truth: Vec<DMat4> = states.iter().map(|&q| hinge(q)).collect();
+        // Every frame samples the rod afresh, as a scanner would.
+        let frames = posed(&truth, |t| scene_sampled(Some(100 + t as u64)));
+        let mut motions: Vec<Vec<DMat4>> = truth
+            .iter()
+            .zip(spins)
+            .map(|(m, s)| vec![DMat4::IDENTITY, *m * turn(DVec3::Z, s, DVec3::ZERO)])
+            .collect();
+        let extents = rod_extents();
+        let before = fit_screw(
+            &motions.iter().map(|m| m[1]).collect::<Vec<_>>(),
+            extents[1],
+        );
+        let flips = repair_flips(&mut motions, &[-1, 0], 0, &pts, &labels, &frames, &extents);
+        let mut fixed: Vec<usize> = flips.iter().map(|f| f.frame).collect();
+        fixed.sort_unstable();
+        assert_eq!(fixed, (1..8).collect::<Vec<_>>());
+        assert_on_truth(&motions, &truth);
+        let after = fit_screw(
+            &motions.iter().map(|m| m[1]).collect::<Vec<_>>(),
+            extents[1],
+        );
+        assert!(
+            after.axis.cross(DVec3::Y).length() < 0.01,
+            "axis {}",
+            after.axis
+        );
+        assert!(
+            after.loss < 1e-3 * before.loss,
+            "{} vs {}",
+            after.loss,
+            before.loss
+        );
     }
 }
