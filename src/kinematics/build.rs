@@ -188,8 +188,8 @@ const STILL_SLIDE: f64 = 0.02;
 /// split in two by Step 1, had a 0.10-rad "hinge" at 0.05 and stayed split: RI 0.735),
 /// below the smallest real hinge range on bench-dev (0.43 rad).
 const STILL_TURN: f64 = 0.15;
-/// Rounds of symmetry repair and tree rebuilding (`KinOptions::flips`); each stops
-/// the rounds when it repairs nothing or leaves the tree as it was.
+/// Most rounds of symmetry repair and tree rebuilding (`KinOptions::flips`); they
+/// stop early when a round repairs nothing or leaves the tree as it was.
 const FLIP_PASSES: usize = 3;
 
 /// Joints of a projected chain that do not move in any frame, as (child, parent): two
