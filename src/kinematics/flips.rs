@@ -24,7 +24,9 @@
 //! a frame switches when its 1-DOF residual drops `SWITCH_GAIN`-fold from above
 //! `MIN_SWITCH_RESIDUAL`. The switches are kept only when the child's full screw fit
 //! (`screw::fit_screw`) improves `KEEP_GAIN`-fold. Parents are repaired before their
-//! children, so a child is judged against its parent's repaired motion. Measured
+//! children, so a child is judged against its parent's repaired motion; the root,
+//! which has no parent, is held still where it is still in most frames
+//! (`still_root`). Measured
 //! effects and the variants tried are in the README ("Half-turn repair").
 
 use glam::{DMat3, DMat4, DVec3, Vec3};
@@ -33,7 +35,8 @@ use nalgebra::{Matrix3, SymmetricEigen};
 use super::observed::{points_by_part, trimmed_fit, POLISH_KEEP, POLISH_ROUNDS};
 use super::project::bfs_order;
 use super::screw::{
-    fit_pivot, fit_screw, log_rotation, one_dof_loss, project_angle, PartExtent, OUTLIER_FRACTION,
+    dev_from_identity, fit_pivot, fit_screw, log_rotation, one_dof_loss, project_angle, PartExtent,
+    OUTLIER_FRACTION,
 };
 use crate::fit::pose_init::trimmed_icp;
 use crate::geom::knn::Grid;
@@ -231,6 +234,66 @@ fn trimmed_sum(res: &mut [f64]) -> f64 {
     res[..res.len() - drop].iter().sum()
 }
 
+/// The root is the part that moves least (Step 2), and a half-turn or a turn about a
+/// symmetry axis of it is invisible in the clouds: when the root is still in most
+/// frames, a frame where it turned takes the variant (half-turn, or the turn about a
+/// symmetry axis back to no rotation, if it fits the cloud: `fits_cloud`) that moves it
+/// `SWITCH_GAIN` times less. A root that moves in most frames (a carried object) is
+/// left alone. Writes the chosen motions and returns them as flips.
+fn still_root(
+    motions: &mut [Vec<DMat4>],
+    b: usize,
+    variants: &[Vec<Variant>],
+    spins: &[DVec3],
+    c: DVec3,
+    canonical: usize,
+    fits_cloud: &mut dyn FnMut(usize, &DMat4) -> bool,
+) -> Vec<Flip> {
+    let mut moved: Vec<f64> = variants
+        .iter()
+        .map(|v| dev_from_identity(&v[0].1))
+        .collect();
+    let mid = moved.len() / 2;
+    if *moved.select_nth_unstable_by(mid, |x, y| x.total_cmp(y)).1 > MIN_SWITCH_RESIDUAL {
+        return Vec::new();
+    }
+    let still = (JointType::Prismatic, DVec3::Z, DVec3::ZERO);
+    let mut out = Vec::new();
+    for (t, v) in variants.iter().enumerate() {
+        let cur = v[0].1;
+        let d0 = dev_from_identity(&cur);
+        if t == canonical || d0 <= MIN_SWITCH_RESIDUAL {
+            continue;
+        }
+        let mut cands: Vec<(DMat4, DMat4)> = v[1..]
+            .iter()
+            .filter_map(|x| x.0.map(|f| (f, x.1)))
+            .collect();
+        for &s in spins {
+            if let Some(f) = spin_for(&cur, still, s, c) {
+                let mo = cur * f;
+                if fits_cloud(t, &mo) {
+                    cands.push((f, mo));
+                }
+            }
+        }
+        if let Some(&(f, mo)) = cands
+            .iter()
+            .min_by(|x, y| dev_from_identity(&x.1).total_cmp(&dev_from_identity(&y.1)))
+        {
+            if SWITCH_GAIN * dev_from_identity(&mo) < d0 {
+                motions[t][b] = mo;
+                out.push(Flip {
+                    frame: t,
+                    part: b,
+                    flip: f,
+                });
+            }
+        }
+    }
+    out
+}
+
 /// Repairs half-turn flips and spins (module doc) in `motions[t][p]` (frame `canonical` → t, at least two
 /// frames), walking the tree `parent` from its root. `points`/`labels`: the canonical
 /// frame's points and their parts; `frames[t]`: every frame's cloud; `extents[p]`: the
@@ -255,9 +318,8 @@ pub fn repair_flips(
     let mut flips = Vec::new();
     let (mut dst, mut buf) = (Vec::new(), Vec::new());
     for b in bfs_order(parent) {
-        let Ok(a) = usize::try_from(parent[b]) else {
-            continue;
-        };
+        // The root's motion is taken relative to the still world.
+        let a = usize::try_from(parent[b]).ok();
         let pts = &by_part[b];
         if pts.len() < MIN_POINTS || extents.len() <= b {
             continue;
@@ -270,7 +332,7 @@ pub fn repair_flips(
         let mut fits = vec![f64::INFINITY; k];
         for (t, frame) in motions.iter().enumerate() {
             let cur = frame[b];
-            let inv_a = rigid_inverse(&frame[a]);
+            let inv_a = a.map_or(DMat4::IDENTITY, |a| rigid_inverse(&frame[a]));
             let mut v = vec![(None, cur, inv_a * cur)];
             if let (Some(grid), Some(cloud)) =
                 (grids.get(t).and_then(Option::as_ref), frames.get(t))
@@ -308,6 +370,22 @@ pub fn repair_flips(
             spin_axes(pts, c, &axes, noise)
         };
         if spins.is_empty() && variants.iter().all(|v| v.len() == 1) {
+            continue;
+        }
+        if a.is_none() {
+            flips.extend(still_root(
+                motions,
+                b,
+                &variants,
+                &spins,
+                c,
+                canonical,
+                &mut |t, mo| {
+                    grids[t].as_ref().is_some_and(|g| {
+                        trimmed_fit(g, pts, mo, POLISH_KEEP, &mut buf) <= DATA_SLACK * fits[t]
+                    })
+                },
+            ));
             continue;
         }
         let reference = extents[b].centre;
@@ -576,6 +654,78 @@ mod tests {
             "{} vs {}",
             after.loss,
             before.loss
+        );
+    }
+
+    #[test]
+    fn a_still_root_turned_half_a_turn_is_put_back() {
+        // The base (a grid the same under a half-turn about its vertical axis) still,
+        // the rod on its hinge; the base's Step-1 pose half a turn off in frames 2 and 5.
+        let (pts, labels) = scene();
+        let hinge = |q: f64| turn(DVec3::Y, q, DVec3::new(0.0, 0.0, 0.12));
+        let states = [0.0, 0.3, 0.6, 0.9, 1.1, 0.8, 0.5, 0.2];
+        let truth: Vec<DMat4> = states.iter().map(|&q| hinge(q)).collect();
+        let frames = posed(&truth, |_| (pts.clone(), labels.clone()));
+        let flip = turn(
+            DVec3::Z,
+            std::f64::consts::PI,
+            DVec3::new(-0.02, -0.02, 0.05),
+        );
+        let mut motions: Vec<Vec<DMat4>> = truth
+            .iter()
+            .enumerate()
+            .map(|(t, m)| {
+                let base = if t == 2 || t == 5 {
+                    flip
+                } else {
+                    DMat4::IDENTITY
+                };
+                vec![base, *m]
+            })
+            .collect();
+        let extents = rod_extents();
+        let flips = repair_flips(&mut motions, &[-1, 0], 0, &pts, &labels, &frames, &extents);
+        let mut fixed: Vec<(usize, usize)> = flips.iter().map(|f| (f.part, f.frame)).collect();
+        fixed.sort_unstable();
+        assert_eq!(fixed, vec![(0, 2), (0, 5)]);
+        for (t, m) in motions.iter().enumerate() {
+            assert!(
+                dev_from_identity(&m[0]) < 1e-4,
+                "frame {t}: base {:?}",
+                m[0]
+            );
+        }
+        assert_on_truth(&motions, &truth);
+        // A root that moves in most frames is left alone.
+        let mut moving: Vec<Vec<DMat4>> = truth
+            .iter()
+            .enumerate()
+            .map(|(t, m)| {
+                let base = if t == 0 { DMat4::IDENTITY } else { flip };
+                vec![base, base * *m]
+            })
+            .collect();
+        let frames = posed(&moving.iter().map(|m| m[1]).collect::<Vec<_>>(), |_| {
+            (pts.clone(), labels.clone())
+        });
+        let frames: Vec<Vec<Vec3>> = frames
+            .iter()
+            .enumerate()
+            .map(|(t, f)| {
+                f.iter()
+                    .zip(&labels)
+                    .map(|(x, &l)| {
+                        if l == 0 {
+                            moving[t][0].transform_point3(x.as_dvec3()).as_vec3()
+                        } else {
+                            *x
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        assert!(
+            repair_flips(&mut moving, &[-1, 0], 0, &pts, &labels, &frames, &extents).is_empty()
         );
     }
 }
