@@ -294,10 +294,11 @@ fn still_root(
     out
 }
 
-/// Repairs half-turn flips and spins (module doc) in `motions[t][p]` (frame `canonical` → t, at least two
-/// frames), walking the tree `parent` from its root. `points`/`labels`: the canonical
-/// frame's points and their parts; `frames[t]`: every frame's cloud; `extents[p]`: the
-/// parts' centroids and radii (screw fits). Returns the replaced motions.
+/// Repairs half-turns and turns about symmetry axes (module doc) in `motions[t][p]`
+/// (frame `canonical` → t, at least two frames), walking the tree `parent` from its
+/// root. `points`/`labels`: the canonical frame's points and their parts; `frames[t]`:
+/// every frame's cloud; `extents[p]`: the parts' centroids and radii (screw fits).
+/// Returns the replaced motions.
 pub fn repair_flips(
     motions: &mut [Vec<DMat4>],
     parent: &[i64],
