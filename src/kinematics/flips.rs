@@ -81,20 +81,37 @@ pub struct Flip {
     pub flip: DMat4,
 }
 
+/// Σ (p − mean)(p − mean)ᵀ over `pts`.
+fn scatter(pts: &[DVec3], mean: DVec3) -> Matrix3<f64> {
+    pts.iter().fold(Matrix3::zeros(), |m, p| {
+        let d = *p - mean;
+        let v = nalgebra::Vector3::new(d.x, d.y, d.z);
+        m + v * v.transpose()
+    })
+}
+
+/// Median of `v` (reordered); `v` must not be empty.
+fn median(v: &mut [f64]) -> f64 {
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, |x, y| x.total_cmp(y)).1
+}
+
+/// Whether moving `pts` by `mo` fits a frame's cloud (`grid`; none: not measured)
+/// within `DATA_SLACK` of `fit_now`, the current pose's fit.
+fn fits_cloud(
+    grid: Option<&Grid>,
+    pts: &[DVec3],
+    mo: &DMat4,
+    fit_now: f64,
+    buf: &mut Vec<f64>,
+) -> bool {
+    grid.is_some_and(|g| trimmed_fit(g, pts, mo, POLISH_KEEP, buf) <= DATA_SLACK * fit_now)
+}
+
 /// Centroid and unit principal axes of `pts`.
 fn principal_axes(pts: &[DVec3]) -> (DVec3, [DVec3; 3]) {
-    let n = pts.len() as f64;
-    let c = pts.iter().copied().sum::<DVec3>() / n;
-    let mut m = Matrix3::<f64>::zeros();
-    for p in pts {
-        let d = *p - c;
-        for i in 0..3 {
-            for j in 0..3 {
-                m[(i, j)] += d[i] * d[j];
-            }
-        }
-    }
-    let e = SymmetricEigen::new(m);
+    let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
+    let e = SymmetricEigen::new(scatter(pts, c));
     let axis = |k: usize| {
         let v = e.eigenvectors.column(k);
         DVec3::new(v[0], v[1], v[2]).normalize_or_zero()
@@ -142,16 +159,7 @@ fn cone_hinge(rel: &[DMat4], a: DVec3, c: DVec3, reference: DVec3) -> Option<Hyp
         return None;
     }
     let mean = b.iter().copied().sum::<DVec3>() / b.len() as f64;
-    let mut m = Matrix3::<f64>::zeros();
-    for x in &b {
-        let d = *x - mean;
-        for i in 0..3 {
-            for j in 0..3 {
-                m[(i, j)] += d[i] * d[j];
-            }
-        }
-    }
-    let e = SymmetricEigen::new(m);
+    let e = SymmetricEigen::new(scatter(&b, mean));
     let mut idx = [0usize, 1, 2];
     idx.sort_by(|&i, &j| e.eigenvalues[i].total_cmp(&e.eigenvalues[j]));
     // The images must span a plane (a circle), not a line (two directions only).
@@ -253,8 +261,7 @@ fn still_root(
         .iter()
         .map(|v| dev_from_identity(&v[0].1))
         .collect();
-    let mid = moved.len() / 2;
-    if *moved.select_nth_unstable_by(mid, |x, y| x.total_cmp(y)).1 > MIN_SWITCH_RESIDUAL {
+    if median(&mut moved) > MIN_SWITCH_RESIDUAL {
         return Vec::new();
     }
     let still = (JointType::Prismatic, DVec3::Z, DVec3::ZERO);
@@ -353,7 +360,7 @@ pub fn repair_flips(
                         &mut dst,
                     );
                     let mo = rigid(r, tr);
-                    if trimmed_fit(grid, pts, &mo, POLISH_KEEP, &mut buf) <= DATA_SLACK * fit_now {
+                    if fits_cloud(Some(grid), pts, &mo, fit_now, &mut buf) {
                         v.push((Some(*f), mo, inv_a * mo));
                     }
                 }
@@ -364,11 +371,7 @@ pub fn repair_flips(
         let spins = if measured.is_empty() {
             Vec::new()
         } else {
-            let mid = measured.len() / 2;
-            let noise = *measured
-                .select_nth_unstable_by(mid, |x, y| x.total_cmp(y))
-                .1;
-            spin_axes(pts, c, &axes, noise)
+            spin_axes(pts, c, &axes, median(&mut measured))
         };
         if spins.is_empty() && variants.iter().all(|v| v.len() == 1) {
             continue;
@@ -381,11 +384,7 @@ pub fn repair_flips(
                 &spins,
                 c,
                 canonical,
-                &mut |t, mo| {
-                    grids[t].as_ref().is_some_and(|g| {
-                        trimmed_fit(g, pts, mo, POLISH_KEEP, &mut buf) <= DATA_SLACK * fits[t]
-                    })
-                },
+                &mut |t, mo| fits_cloud(grids[t].as_ref(), pts, mo, fits[t], &mut buf),
             ));
             continue;
         }
@@ -415,10 +414,7 @@ pub fn repair_flips(
             for &s in &spins {
                 if let Some(f) = spin_for(&rel, h, s, c) {
                     let mo = cur * f;
-                    let fits_cloud = grids[t].as_ref().is_some_and(|g| {
-                        trimmed_fit(g, pts, &mo, POLISH_KEEP, buf) <= DATA_SLACK * fits[t]
-                    });
-                    if fits_cloud {
+                    if fits_cloud(grids[t].as_ref(), pts, &mo, fits[t], buf) {
                         out.push((Some(f), mo, rel * f));
                     }
                 }
