@@ -119,4 +119,36 @@ fn main() {
         );
     }
     println!("total reconstruction error {total:.3}");
+    // Flow error split by label: a point counts as well labelled when its
+    // predicted part's majority ground-truth part is its own.
+    let mut major = vec![0usize; result.parts];
+    for (a, m) in major.iter_mut().enumerate() {
+        *m = (0..gp).max_by_key(|&g| conf[g][a]).unwrap_or(0);
+    }
+    let (mut fw, mut fm, mut nw) = (0.0, 0.0, 0usize);
+    for (i, x) in cloud.points.iter().enumerate() {
+        let (g, a) = (gl[i] as usize, pred[i] as usize);
+        let x = x.as_dvec3();
+        let mut e = 0.0;
+        for t in 0..k - 1 {
+            let dp = poses[t + 1][a].transform_point3(x) - poses[t][a].transform_point3(x);
+            let y =
+                |t: usize| (gt.poses[t][g] * rigid_inverse(&gt.poses[c][g])).transform_point3(x);
+            e += (dp - (y(t + 1) - y(t))).length();
+        }
+        let e = 100.0 * e / (k - 1) as f64;
+        if major[a] == g {
+            fw += e;
+            nw += 1;
+        } else {
+            fm += e;
+        }
+    }
+    println!(
+        "flow: well-labelled {:.3} of points contribute {:.3}, mislabelled contribute {:.3} (mean over mislabelled {:.2})",
+        nw as f64 / n,
+        fw / n,
+        fm / n,
+        fm / (n - nw as f64).max(1.0)
+    );
 }

@@ -359,6 +359,12 @@ pub fn finish(
             kin.flips
         ));
     }
+    if kin.swept > 0 {
+        notes.push(format!(
+            "{} part poses were replaced by a better fit found along their joints",
+            kin.swept
+        ));
+    }
     result.info = Some(serde_json::json!({
         "generator": concat!("gsart ", env!("CARGO_PKG_VERSION")),
         "m": step1.m,
@@ -374,6 +380,7 @@ pub fn finish(
         "kinematics_seconds": kin.timings,
         "relabel": {"changed": relabelled, "seconds": relabel_s},
         "symmetry_turns": kin.flips,
+        "joint_sweeps": kin.swept,
         "refine": kin.refine,
         "notes": notes,
     }));

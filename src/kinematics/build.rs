@@ -7,7 +7,7 @@
 use glam::{DMat4, DVec3, Vec3};
 use serde::Serialize;
 
-use super::flips::repair_flips;
+use super::flips::Repair;
 use super::merge::{absorb, merge_parts, MergeEvent, MergeOptions};
 use super::observed::{
     keep_faithful_poses, object_size, observed_motion, polish_motions, polish_poses,
@@ -89,6 +89,9 @@ pub struct KinReport {
     /// (part, frame) motions replaced by a half-turn or a turn about a symmetry axis
     /// (`kinematics::flips`), over all repair rounds.
     pub flips: usize,
+    /// (part, frame) motions replaced by a better-fitting pose found along the joint
+    /// (`kinematics::joint_sweep`), over all repair rounds.
+    pub swept: usize,
     /// (stage, seconds) from the caller's clock.
     pub timings: Vec<(String, f64)>,
 }
@@ -312,7 +315,7 @@ pub fn build_articulated(
     // Tree and joints; a joint that does not move (after the projection, or after
     // the refinement) absorbs its child into its parent, and the tree is built again.
     let (mut tree_s, mut proj_s, mut refine_s) = (0.0, 0.0, 0.0);
-    let mut flipped = 0;
+    let (mut flipped, mut swept) = (0, 0);
     let (parts, dist, costs, root, parent, result, residuals, refine_report, observed) = loop {
         // The tree and the joints are built from each part's observed motion, polished
         // against the clouds (`polished_input`), not from its largest Gaussian's pose.
@@ -339,20 +342,19 @@ pub fn build_articulated(
         };
         let (mut extents, mut costs, mut root, mut parent) = tree_of(&merged.poses);
         if opts.flips {
-            flipped = 0;
+            (flipped, swept) = (0, 0);
             // A repair can change the tree, and a part repaired against a wrong
             // parent is then judged again against its new one.
+            let mut repair = Repair::new(
+                canonical,
+                &points[canonical],
+                &new_labels[canonical],
+                points,
+                parts,
+            );
             for _ in 0..FLIP_PASSES {
                 let mut motions = motions_from_canonical(&merged.poses, canonical);
-                let flips = repair_flips(
-                    &mut motions,
-                    &parent,
-                    canonical,
-                    &points[canonical],
-                    &new_labels[canonical],
-                    points,
-                    &extents,
-                );
+                let flips = repair.run(&mut motions, &parent, &extents);
                 if flips.is_empty() {
                     break;
                 }
@@ -360,7 +362,9 @@ pub fn build_articulated(
                     observed[f.frame][f.part] *= f.flip;
                 }
                 merged.poses = motions;
-                flipped += flips.len();
+                let n = flips.iter().filter(|f| f.swept).count();
+                swept += n;
+                flipped += flips.len() - n;
                 let before = parent.clone();
                 (extents, costs, root, parent) = tree_of(&merged.poses);
                 if parent == before {
@@ -456,6 +460,7 @@ pub fn build_articulated(
         refine: refine_report,
         poses_replaced,
         flips: flipped,
+        swept,
         timings,
     };
     Ok((result, report))

@@ -26,19 +26,20 @@
 //! (`screw::fit_screw`) improves `KEEP_GAIN`-fold. Parents are repaired before their
 //! children, so a child is judged against its parent's repaired motion; the root,
 //! which has no parent, is held still where it is still in most frames
-//! (`still_root`). Measured
-//! effects and the variants tried are in the README ("Half-turn repair").
+//! (`still_root`). After its turns, each child's pose in every frame is searched
+//! again along the consensus screw (`joint_sweep`). Measured effects and the variants
+//! tried are in the README ("Half-turn repair", "Joint sweep").
 
 use glam::{DMat3, DMat4, DVec3, Vec3};
 use nalgebra::{Matrix3, SymmetricEigen};
 
-use super::observed::{points_by_part, trimmed_fit, POLISH_KEEP, POLISH_ROUNDS};
+use super::joint_sweep::sweep_child;
+use super::observed::{points_by_part, polish_pose, trimmed_fit, POLISH_KEEP};
 use super::project::bfs_order;
 use super::screw::{
     dev_from_identity, fit_pivot, fit_screw, log_rotation, one_dof_loss, project_angle, PartExtent,
     OUTLIER_FRACTION,
 };
-use crate::fit::pose_init::trimmed_icp;
 use crate::geom::knn::Grid;
 use crate::geom::se3::{rigid, rigid_inverse};
 use crate::io::gt::JointType;
@@ -79,6 +80,9 @@ pub struct Flip {
     pub part: usize,
     /// The half-turn or turn about a symmetry axis, a rigid map of the canonical frame.
     pub flip: DMat4,
+    /// The new motion came from the sweep along the joint (`joint_sweep`), not from a
+    /// turn.
+    pub swept: bool,
 }
 
 /// Σ (p − mean)(p − mean)ᵀ over `pts`.
@@ -208,7 +212,7 @@ fn spin_for(q: &DMat4, (jt, axis, _): Hypothesis, a: DVec3, c: DVec3) -> Option<
 type Variant = (Option<DMat4>, DMat4, DMat4);
 
 /// A screw proposed by one relative motion: (type, axis, pivot).
-type Hypothesis = (JointType, DVec3, DVec3);
+pub(crate) type Hypothesis = (JointType, DVec3, DVec3);
 
 /// Screws proposed by relative motion `q`: the hinge about its rotation axis (through
 /// the point of it nearest `reference`) when it turns by more than `MIN_TURN`, and the
@@ -294,6 +298,7 @@ fn still_root(
                     frame: t,
                     part: b,
                     flip: f,
+                    swept: false,
                 });
             }
         }
@@ -315,181 +320,224 @@ pub fn repair_flips(
     frames: &[Vec<Vec3>],
     extents: &[PartExtent],
 ) -> Vec<Flip> {
-    let parts = parent.len();
-    let k = motions.len();
-    let by_part = points_by_part(points, labels, parts);
-    let grids: Vec<Option<Grid>> = frames
-        .iter()
-        .enumerate()
-        .map(|(t, c)| (t != canonical && !c.is_empty()).then(|| Grid::new(c)))
-        .collect();
-    let mut flips = Vec::new();
-    let (mut dst, mut buf) = (Vec::new(), Vec::new());
-    for b in bfs_order(parent) {
-        // The root's motion is taken relative to the still world.
-        let a = usize::try_from(parent[b]).ok();
-        let pts = &by_part[b];
-        if pts.len() < MIN_POINTS || extents.len() <= b {
-            continue;
-        }
-        let (c, axes) = principal_axes(pts);
-        let turns = half_turns(c, &axes);
-        // Per frame: (half-turn or None, motion, relative motion to the parent), and
-        // the current motion's fit to the frame's cloud.
-        let mut variants: Vec<Vec<Variant>> = Vec::with_capacity(k);
-        let mut fits = vec![f64::INFINITY; k];
-        for (t, frame) in motions.iter().enumerate() {
-            let cur = frame[b];
-            let inv_a = a.map_or(DMat4::IDENTITY, |a| rigid_inverse(&frame[a]));
-            let mut v = vec![(None, cur, inv_a * cur)];
-            if let (Some(grid), Some(cloud)) =
-                (grids.get(t).and_then(Option::as_ref), frames.get(t))
-            {
-                let fit_now = trimmed_fit(grid, pts, &cur, POLISH_KEEP, &mut buf);
-                fits[t] = fit_now;
-                for f in &turns {
-                    let start = cur * *f;
-                    let from = (DMat3::from_mat4(start), start.w_axis.truncate());
-                    let (r, tr) = trimmed_icp(
-                        grid,
-                        |j| cloud[j].as_dvec3(),
-                        pts,
-                        from,
-                        POLISH_ROUNDS,
-                        POLISH_KEEP,
-                        &mut dst,
-                    );
-                    let mo = rigid(r, tr);
-                    if fits_cloud(Some(grid), pts, &mo, fit_now, &mut buf) {
-                        v.push((Some(*f), mo, inv_a * mo));
-                    }
-                }
-            }
-            variants.push(v);
-        }
-        let mut measured: Vec<f64> = fits.iter().copied().filter(|f| f.is_finite()).collect();
-        let spins = if measured.is_empty() {
-            Vec::new()
-        } else {
-            spin_axes(pts, c, &axes, median(&mut measured))
-        };
-        if spins.is_empty() && variants.iter().all(|v| v.len() == 1) {
-            continue;
-        }
-        if a.is_none() {
-            flips.extend(still_root(
-                motions,
-                b,
-                &variants,
-                &spins,
-                c,
-                canonical,
-                &mut |t, mo| fits_cloud(grids[t].as_ref(), pts, mo, fits[t], &mut buf),
-            ));
-            continue;
-        }
-        let reference = extents[b].centre;
-        let mut hyps = Vec::new();
-        // Only current motions propose screws: a half-turned one would propose the
-        // half-turn itself as the joint's motion (a symmetric panda finger "hinged"
-        // half a turn in one frame explains that frame exactly). A part symmetric
-        // about an axis also proposes the hinge its axis follows.
-        for (t, v) in variants.iter().enumerate() {
-            if t != canonical {
-                hypotheses(&v[0].2, reference, &mut hyps);
-            }
-        }
-        let current: Vec<DMat4> = variants.iter().map(|v| v[0].2).collect();
-        hyps.extend(
-            spins
+    Repair::new(canonical, points, labels, frames, parent.len()).run(motions, parent, extents)
+}
+
+/// The repair's data for one sequence, kept over repeated rounds (`repair_flips`
+/// runs one round): the parts' canonical points, every frame's grid, and which
+/// parent each child was last swept under (`joint_sweep`), so a round after the tree
+/// changed sweeps only the children whose parent changed.
+pub struct Repair<'a> {
+    canonical: usize,
+    frames: &'a [Vec<Vec3>],
+    by_part: Vec<Vec<DVec3>>,
+    grids: Vec<Option<Grid>>,
+    swept_under: Vec<Option<usize>>,
+}
+
+impl<'a> Repair<'a> {
+    pub fn new(
+        canonical: usize,
+        points: &[Vec3],
+        labels: &[u32],
+        frames: &'a [Vec<Vec3>],
+        parts: usize,
+    ) -> Self {
+        Repair {
+            canonical,
+            frames,
+            by_part: points_by_part(points, labels, parts),
+            grids: frames
                 .iter()
-                .filter_map(|&s| cone_hinge(&current, s, c, reference)),
-        );
-        // A frame's candidates under screw `h`: its half-turns, and its turn about
-        // each symmetry axis that follows `h` (when it still fits the cloud).
-        let candidates = |t: usize, h: Hypothesis, out: &mut Vec<Variant>, buf: &mut Vec<f64>| {
-            out.clear();
-            out.extend_from_slice(&variants[t]);
-            let (cur, rel) = (variants[t][0].1, variants[t][0].2);
-            for &s in &spins {
-                if let Some(f) = spin_for(&rel, h, s, c) {
-                    let mo = cur * f;
-                    if fits_cloud(grids[t].as_ref(), pts, &mo, fits[t], buf) {
-                        out.push((Some(f), mo, rel * f));
-                    }
-                }
-            }
-        };
-        let (mut res, mut cand) = (Vec::with_capacity(k), Vec::new());
-        let mut score = |h: Hypothesis, res: &mut Vec<f64>| {
-            res.clear();
-            for t in 0..k {
-                if t != canonical {
-                    candidates(t, h, &mut cand, &mut buf);
-                    res.push(
-                        cand.iter()
-                            .map(|x| residual(&x.2, h))
-                            .fold(f64::INFINITY, f64::min),
-                    );
-                }
-            }
-            trimmed_sum(res)
-        };
-        let Some(best) = hyps
-            .iter()
-            .map(|&h| (h, score(h, &mut res)))
-            .min_by(|x, y| x.1.total_cmp(&y.1))
-            .map(|x| x.0)
-        else {
-            continue;
-        };
-        // Each frame's variant under the consensus screw.
-        let mut cand = Vec::new();
-        let chosen: Vec<Variant> = (0..k)
-            .map(|t| {
-                candidates(t, best, &mut cand, &mut buf);
-                let r: Vec<f64> = cand.iter().map(|x| residual(&x.2, best)).collect();
-                let (j, rj) = r
-                    .iter()
-                    .enumerate()
-                    .min_by(|x, y| x.1.total_cmp(y.1))
-                    .map_or((0, 0.0), |(j, &rj)| (j, rj));
-                if t != canonical && j > 0 && SWITCH_GAIN * rj < r[0] && r[0] > MIN_SWITCH_RESIDUAL
-                {
-                    cand[j]
-                } else {
-                    cand[0]
-                }
-            })
-            .collect();
-        if chosen.iter().all(|x| x.0.is_none()) {
-            continue;
-        }
-        let before = fit_screw(&current, extents[b]).loss;
-        let after_rel: Vec<DMat4> = chosen.iter().map(|x| x.2).collect();
-        let after = fit_screw(&after_rel, extents[b]).loss;
-        if KEEP_GAIN * after >= before {
-            continue;
-        }
-        for (t, x) in chosen.iter().enumerate() {
-            if let (Some(f), mo, _) = *x {
-                motions[t][b] = mo;
-                flips.push(Flip {
-                    frame: t,
-                    part: b,
-                    flip: f,
-                });
-            }
+                .enumerate()
+                .map(|(t, c)| (t != canonical && !c.is_empty()).then(|| Grid::new(c)))
+                .collect(),
+            swept_under: vec![None; parts],
         }
     }
-    flips
+
+    /// One round of the repair (`repair_flips`) under tree `parent`.
+    pub fn run(
+        &mut self,
+        motions: &mut [Vec<DMat4>],
+        parent: &[i64],
+        extents: &[PartExtent],
+    ) -> Vec<Flip> {
+        let (canonical, frames) = (self.canonical, self.frames);
+        let k = motions.len();
+        let mut flips = Vec::new();
+        let (mut dst, mut buf) = (Vec::new(), Vec::new());
+        for b in bfs_order(parent) {
+            // The root's motion is taken relative to the still world.
+            let a = usize::try_from(parent[b]).ok();
+            let pts = &self.by_part[b];
+            if pts.len() < MIN_POINTS || extents.len() <= b {
+                continue;
+            }
+            let (c, axes) = principal_axes(pts);
+            let turns = half_turns(c, &axes);
+            // Per frame: (half-turn or None, motion, relative motion to the parent), and
+            // the current motion's fit to the frame's cloud.
+            let mut variants: Vec<Vec<Variant>> = Vec::with_capacity(k);
+            let mut fits = vec![f64::INFINITY; k];
+            for (t, frame) in motions.iter().enumerate() {
+                let cur = frame[b];
+                let inv_a = a.map_or(DMat4::IDENTITY, |a| rigid_inverse(&frame[a]));
+                let mut v = vec![(None, cur, inv_a * cur)];
+                if let (Some(grid), Some(cloud)) =
+                    (self.grids.get(t).and_then(Option::as_ref), frames.get(t))
+                {
+                    let fit_now = trimmed_fit(grid, pts, &cur, POLISH_KEEP, &mut buf);
+                    fits[t] = fit_now;
+                    for f in &turns {
+                        let mo = polish_pose(grid, cloud, pts, &(cur * *f), &mut dst);
+                        if fits_cloud(Some(grid), pts, &mo, fit_now, &mut buf) {
+                            v.push((Some(*f), mo, inv_a * mo));
+                        }
+                    }
+                }
+                variants.push(v);
+            }
+            let mut measured: Vec<f64> = fits.iter().copied().filter(|f| f.is_finite()).collect();
+            let spins = if measured.is_empty() {
+                Vec::new()
+            } else {
+                spin_axes(pts, c, &axes, median(&mut measured))
+            };
+            if a.is_none() {
+                flips.extend(still_root(
+                    motions,
+                    b,
+                    &variants,
+                    &spins,
+                    c,
+                    canonical,
+                    &mut |t, mo| fits_cloud(self.grids[t].as_ref(), pts, mo, fits[t], &mut buf),
+                ));
+                continue;
+            }
+            let reference = extents[b].centre;
+            let mut hyps = Vec::new();
+            // Only current motions propose screws: a half-turned one would propose the
+            // half-turn itself as the joint's motion (a symmetric panda finger "hinged"
+            // half a turn in one frame explains that frame exactly). A part symmetric
+            // about an axis also proposes the hinge its axis follows.
+            for (t, v) in variants.iter().enumerate() {
+                if t != canonical {
+                    hypotheses(&v[0].2, reference, &mut hyps);
+                }
+            }
+            let current: Vec<DMat4> = variants.iter().map(|v| v[0].2).collect();
+            hyps.extend(
+                spins
+                    .iter()
+                    .filter_map(|&s| cone_hinge(&current, s, c, reference)),
+            );
+            // A frame's candidates under screw `h`: its half-turns, and its turn about
+            // each symmetry axis that follows `h` (when it still fits the cloud).
+            let candidates =
+                |t: usize, h: Hypothesis, out: &mut Vec<Variant>, buf: &mut Vec<f64>| {
+                    out.clear();
+                    out.extend_from_slice(&variants[t]);
+                    let (cur, rel) = (variants[t][0].1, variants[t][0].2);
+                    for &s in &spins {
+                        if let Some(f) = spin_for(&rel, h, s, c) {
+                            let mo = cur * f;
+                            if fits_cloud(self.grids[t].as_ref(), pts, &mo, fits[t], buf) {
+                                out.push((Some(f), mo, rel * f));
+                            }
+                        }
+                    }
+                };
+            let (mut res, mut cand) = (Vec::with_capacity(k), Vec::new());
+            let mut score = |h: Hypothesis, res: &mut Vec<f64>| {
+                res.clear();
+                for t in 0..k {
+                    if t != canonical {
+                        candidates(t, h, &mut cand, &mut buf);
+                        res.push(
+                            cand.iter()
+                                .map(|x| residual(&x.2, h))
+                                .fold(f64::INFINITY, f64::min),
+                        );
+                    }
+                }
+                trimmed_sum(res)
+            };
+            let Some(best) = hyps
+                .iter()
+                .map(|&h| (h, score(h, &mut res)))
+                .min_by(|x, y| x.1.total_cmp(&y.1))
+                .map(|x| x.0)
+            else {
+                continue;
+            };
+            // Each frame's variant under the consensus screw.
+            let mut cand = Vec::new();
+            let chosen: Vec<Variant> = (0..k)
+                .map(|t| {
+                    candidates(t, best, &mut cand, &mut buf);
+                    let r: Vec<f64> = cand.iter().map(|x| residual(&x.2, best)).collect();
+                    let (j, rj) = r
+                        .iter()
+                        .enumerate()
+                        .min_by(|x, y| x.1.total_cmp(y.1))
+                        .map_or((0, 0.0), |(j, &rj)| (j, rj));
+                    if t != canonical
+                        && j > 0
+                        && SWITCH_GAIN * rj < r[0]
+                        && r[0] > MIN_SWITCH_RESIDUAL
+                    {
+                        cand[j]
+                    } else {
+                        cand[0]
+                    }
+                })
+                .collect();
+            let keep = !chosen.iter().all(|x| x.0.is_none()) && {
+                let before = fit_screw(&current, extents[b]).loss;
+                let after_rel: Vec<DMat4> = chosen.iter().map(|x| x.2).collect();
+                KEEP_GAIN * fit_screw(&after_rel, extents[b]).loss < before
+            };
+            if keep {
+                for (t, x) in chosen.iter().enumerate() {
+                    if let (Some(f), mo, _) = *x {
+                        motions[t][b] = mo;
+                        flips.push(Flip {
+                            frame: t,
+                            part: b,
+                            flip: f,
+                            swept: false,
+                        });
+                    }
+                }
+            }
+            // Then each frame's pose is searched again along the consensus screw,
+            // once per parent.
+            if let Some(a) = a.filter(|&a| self.swept_under[b] != Some(a)) {
+                self.swept_under[b] = Some(a);
+                flips.extend(sweep_child(
+                    motions,
+                    a,
+                    b,
+                    best,
+                    pts,
+                    frames,
+                    &self.grids,
+                    &mut dst,
+                    &mut buf,
+                ));
+            }
+        }
+        flips
+    }
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn turn(axis: DVec3, angle: f64, pivot: DVec3) -> DMat4 {
+    pub(crate) fn turn(axis: DVec3, angle: f64, pivot: DVec3) -> DMat4 {
         let r = DMat3::from_axis_angle(axis.normalize(), angle);
         rigid(r, pivot - r * pivot)
     }
@@ -502,7 +550,7 @@ mod tests {
 
     /// `scene` with the rod's points drawn at random (`seed`; none: on a regular grid),
     /// as an independent sample of the same surface.
-    fn scene_sampled(seed: Option<u64>) -> (Vec<Vec3>, Vec<u32>) {
+    pub(crate) fn scene_sampled(seed: Option<u64>) -> (Vec<Vec3>, Vec<u32>) {
         use rand::{Rng, SeedableRng};
         let mut rng = seed.map(rand::rngs::SmallRng::seed_from_u64);
         let mut pts = Vec::new();
@@ -537,7 +585,10 @@ mod tests {
     }
 
     /// Frame `t`'s cloud: `sample(t)` with the rod moved by `truth[t]`.
-    fn posed(truth: &[DMat4], sample: impl Fn(usize) -> (Vec<Vec3>, Vec<u32>)) -> Vec<Vec<Vec3>> {
+    pub(crate) fn posed(
+        truth: &[DMat4],
+        sample: impl Fn(usize) -> (Vec<Vec3>, Vec<u32>),
+    ) -> Vec<Vec<Vec3>> {
         truth
             .iter()
             .enumerate()
@@ -569,7 +620,7 @@ mod tests {
     }
 
     /// The base's and the rod's extents for the screw fits.
-    fn rod_extents() -> Vec<PartExtent> {
+    pub(crate) fn rod_extents() -> Vec<PartExtent> {
         vec![
             PartExtent::default(),
             PartExtent {

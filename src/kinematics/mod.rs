@@ -4,6 +4,7 @@
 pub mod build;
 pub mod chain;
 pub mod flips;
+pub mod joint_sweep;
 pub mod merge;
 pub mod observed;
 pub mod project;

@@ -238,6 +238,28 @@ pub(crate) fn points_by_part(points: &[Vec3], labels: &[u32], parts: usize) -> V
     by_part
 }
 
+/// `start` polished against `cloud` (`grid` its grid) by trimmed ICP of `pts`, as the
+/// reported poses are (`POLISH_ROUNDS`, `POLISH_KEEP`).
+pub(crate) fn polish_pose(
+    grid: &Grid,
+    cloud: &[Vec3],
+    pts: &[DVec3],
+    start: &DMat4,
+    dst: &mut Vec<DVec3>,
+) -> DMat4 {
+    let from = (DMat3::from_mat4(*start), start.w_axis.truncate());
+    let (r, tr) = trimmed_icp(
+        grid,
+        |j| cloud[j].as_dvec3(),
+        pts,
+        from,
+        POLISH_ROUNDS,
+        POLISH_KEEP,
+        dst,
+    );
+    rigid(r, tr)
+}
+
 /// Mean of the `keep` fraction of smallest squared distances from the moved points to
 /// the cloud.
 pub(crate) fn trimmed_fit(
