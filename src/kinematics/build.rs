@@ -45,7 +45,8 @@ pub struct KinOptions {
     pub polish: bool,
     /// Repair the poses of nearly symmetric parts (half-turns; turns about an axis of
     /// rotational symmetry) against their parents once the tree is known
-    /// (`kinematics::flips`), then build the tree again.
+    /// (`kinematics::flips`), search every child's pose again along its joint
+    /// (`kinematics::joint_sweep`), then build the tree again.
     pub flips: bool,
 }
 

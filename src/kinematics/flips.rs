@@ -78,7 +78,8 @@ const MIN_SLIDE: f64 = 1e-3;
 pub struct Flip {
     pub frame: usize,
     pub part: usize,
-    /// The half-turn or turn about a symmetry axis, a rigid map of the canonical frame.
+    /// The rigid map of the canonical frame applied after the old motion: a half-turn,
+    /// a turn about a symmetry axis, or the change to the swept pose.
     pub flip: DMat4,
     /// The new motion came from the sweep along the joint (`joint_sweep`), not from a
     /// turn.

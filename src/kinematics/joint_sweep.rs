@@ -19,7 +19,7 @@
 //! are swept before their children, so a child is judged against its parent's new
 //! motion. On full input only, like the rest of the repair.
 
-use glam::{DMat3, DMat4, DVec3};
+use glam::{DMat3, DMat4, DVec3, Vec3};
 
 use super::flips::{Flip, Hypothesis};
 use super::observed::{polish_pose, trimmed_fit, POLISH_KEEP};
@@ -46,9 +46,9 @@ const PROBE: usize = 256;
 /// Least slide range (fit units) swept for a prismatic joint.
 const MIN_SLIDE: f64 = 1e-3;
 
-/// Relative motion along a screw (type, unit axis, a point on a hinge's axis) at
-/// state `s` (radians or length).
-fn along(jt: JointType, axis: DVec3, pivot: DVec3, s: f64) -> DMat4 {
+/// Relative motion along screw (type, unit axis, a point on a hinge's axis) at state
+/// `s` (radians or length).
+fn along((jt, axis, pivot): Hypothesis, s: f64) -> DMat4 {
     match jt {
         JointType::Revolute => {
             let r = DMat3::from_axis_angle(axis, s);
@@ -58,20 +58,18 @@ fn along(jt: JointType, axis: DVec3, pivot: DVec3, s: f64) -> DMat4 {
     }
 }
 
-/// Relative motions on the screw whose poses (`pa` times them) are the best local
-/// minima of the fit of `pts` to the cloud in `grid`, at most `CANDIDATES`, best first.
-#[allow(clippy::too_many_arguments)]
+/// Relative motions on screw `h` whose poses (`pa` times them) are the best local
+/// minima of the fit of `pts` to the cloud in `grid`, at most `CANDIDATES`, best
+/// first; `states`: the frames' states, which set a slide's range.
 fn sweep(
     grid: &Grid,
     pts: &[DVec3],
     pa: &DMat4,
-    jt: JointType,
-    axis: DVec3,
-    pivot: DVec3,
+    h: Hypothesis,
     states: &[f64],
     buf: &mut Vec<f64>,
 ) -> Vec<DMat4> {
-    let revolute = jt == JointType::Revolute;
+    let revolute = h.0 == JointType::Revolute;
     let (lo, step) = if revolute {
         (-std::f64::consts::PI, std::f64::consts::TAU / STEPS as f64)
     } else {
@@ -83,15 +81,8 @@ fn sweep(
     if !lo.is_finite() {
         return Vec::new();
     }
-    let fit = |s: f64, buf: &mut Vec<f64>| {
-        trimmed_fit(
-            grid,
-            pts,
-            &(*pa * along(jt, axis, pivot, s)),
-            POLISH_KEEP,
-            buf,
-        )
-    };
+    let fit =
+        |s: f64, buf: &mut Vec<f64>| trimmed_fit(grid, pts, &(*pa * along(h, s)), POLISH_KEEP, buf);
     // A full turn wraps around; a slide's sweep has two ends.
     let n = if revolute { STEPS } else { STEPS + 1 };
     let f: Vec<f64> = (0..n).map(|i| fit(lo + step * i as f64, buf)).collect();
@@ -120,7 +111,7 @@ fn sweep(
                     best = (v, s);
                 }
             }
-            along(jt, axis, pivot, best.1)
+            along(h, best.1)
         })
         .collect()
 }
@@ -146,12 +137,11 @@ pub(crate) fn sweep_child(
     b: usize,
     h: Hypothesis,
     pts: &[DVec3],
-    frames: &[Vec<glam::Vec3>],
+    frames: &[Vec<Vec3>],
     grids: &[Option<Grid>],
     dst: &mut Vec<DVec3>,
     buf: &mut Vec<f64>,
 ) -> Vec<Flip> {
-    let (jt, axis, pivot) = h;
     let states: Vec<f64> = motions
         .iter()
         .map(|m| state_of(&(rigid_inverse(&m[a]) * m[b]), h))
@@ -172,7 +162,7 @@ pub(crate) fn sweep_child(
         // candidate must come from a better basin, not just from the polish.
         let (fit_now, now) = polish(cur, dst, buf);
         let mut best: Option<(f64, DMat4)> = None;
-        for q in sweep(grid, &probe, &pa, jt, axis, pivot, &states, buf) {
+        for q in sweep(grid, &probe, &pa, h, &states, buf) {
             let (f, mo) = polish(pa * q, dst, buf);
             if best.is_none_or(|x| f < x.0) {
                 best = Some((f, mo));
