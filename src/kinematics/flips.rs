@@ -125,7 +125,7 @@ fn principal_axes(pts: &[DVec3]) -> (DVec3, [DVec3; 3]) {
 }
 
 /// The turn by `angle` about the line through `c` along unit `axis`.
-fn turn_about(axis: DVec3, angle: f64, c: DVec3) -> DMat4 {
+pub(crate) fn turn_about(axis: DVec3, angle: f64, c: DVec3) -> DMat4 {
     let r = DMat3::from_axis_angle(axis, angle);
     rigid(r, c - r * c)
 }
@@ -232,12 +232,17 @@ fn hypotheses(q: &DMat4, reference: DVec3, out: &mut Vec<Hypothesis>) {
 }
 
 /// 1-DOF residual of relative motion `q` under a screw, at its best state.
-fn residual(q: &DMat4, (jt, axis, pivot): Hypothesis) -> f64 {
-    let s = match jt {
+fn residual(q: &DMat4, h: Hypothesis) -> f64 {
+    let (jt, axis, pivot) = h;
+    one_dof_loss(std::slice::from_ref(q), jt, axis, pivot, &[state_of(q, h)])
+}
+
+/// State of relative motion `q` along screw `h` (angle or slide).
+pub(crate) fn state_of(q: &DMat4, (jt, axis, _): Hypothesis) -> f64 {
+    match jt {
         JointType::Revolute => project_angle(axis, &DMat3::from_mat4(*q)),
         JointType::Prismatic => q.w_axis.truncate().dot(axis),
-    };
-    one_dof_loss(std::slice::from_ref(q), jt, axis, pivot, &[s])
+    }
 }
 
 /// Sum of `res` without its largest `OUTLIER_FRACTION`.
@@ -405,7 +410,7 @@ impl<'a> Repair<'a> {
             } else {
                 spin_axes(pts, c, &axes, median(&mut measured))
             };
-            if a.is_none() {
+            let Some(a) = a else {
                 flips.extend(still_root(
                     motions,
                     b,
@@ -416,7 +421,7 @@ impl<'a> Repair<'a> {
                     &mut |t, mo| fits_cloud(self.grids[t].as_ref(), pts, mo, fits[t], &mut buf),
                 ));
                 continue;
-            }
+            };
             let reference = extents[b].centre;
             let mut hyps = Vec::new();
             // Only current motions propose screws: a half-turned one would propose the
@@ -515,7 +520,7 @@ impl<'a> Repair<'a> {
             }
             // Then each frame's pose is searched again along the consensus screw,
             // once per parent.
-            if let Some(a) = a.filter(|&a| self.swept_under[b] != Some(a)) {
+            if self.swept_under[b] != Some(a) {
                 self.swept_under[b] = Some(a);
                 flips.extend(sweep_child(
                     motions,

@@ -19,13 +19,12 @@
 //! are swept before their children, so a child is judged against its parent's new
 //! motion. On full input only, like the rest of the repair.
 
-use glam::{DMat3, DMat4, DVec3, Vec3};
+use glam::{DMat4, DVec3, Vec3};
 
-use super::flips::{Flip, Hypothesis};
+use super::flips::{state_of, turn_about, Flip, Hypothesis};
 use super::observed::{polish_pose, trimmed_fit, POLISH_KEEP};
-use super::screw::project_angle;
 use crate::geom::knn::Grid;
-use crate::geom::se3::{rigid, rigid_inverse};
+use crate::geom::se3::rigid_inverse;
 use crate::io::gt::JointType;
 
 /// A swept pose replaces the current one when, both polished, its fit to the
@@ -50,10 +49,7 @@ const MIN_SLIDE: f64 = 1e-3;
 /// `s` (radians or length).
 fn along((jt, axis, pivot): Hypothesis, s: f64) -> DMat4 {
     match jt {
-        JointType::Revolute => {
-            let r = DMat3::from_axis_angle(axis, s);
-            rigid(r, pivot - r * pivot)
-        }
+        JointType::Revolute => turn_about(axis, s, pivot),
         JointType::Prismatic => DMat4::from_translation(axis * s),
     }
 }
@@ -114,14 +110,6 @@ fn sweep(
             along(h, best.1)
         })
         .collect()
-}
-
-/// State of relative motion `q` along screw `h`.
-fn state_of(q: &DMat4, (jt, axis, _): Hypothesis) -> f64 {
-    match jt {
-        JointType::Revolute => project_angle(axis, &DMat3::from_mat4(*q)),
-        JointType::Prismatic => q.w_axis.truncate().dot(axis),
-    }
 }
 
 /// Sweeps child `b` of part `a` along screw `h` in every frame (module doc),
