@@ -369,8 +369,6 @@ impl<'a> Repair<'a> {
         parent: &[i64],
         extents: &[PartExtent],
     ) -> Vec<Flip> {
-        let (canonical, frames) = (self.canonical, self.frames);
-        let k = motions.len();
         let mut flips = Vec::new();
         let (mut dst, mut buf) = (Vec::new(), Vec::new());
         for b in bfs_order(parent) {
@@ -380,144 +378,24 @@ impl<'a> Repair<'a> {
             if pts.len() < MIN_POINTS || extents.len() <= b {
                 continue;
             }
-            let (c, axes) = principal_axes(pts);
-            let turns = half_turns(c, &axes);
-            // Per frame: (half-turn or None, motion, relative motion to the parent), and
-            // the current motion's fit to the frame's cloud.
-            let mut variants: Vec<Vec<Variant>> = Vec::with_capacity(k);
-            let mut fits = vec![f64::INFINITY; k];
-            for (t, frame) in motions.iter().enumerate() {
-                let cur = frame[b];
-                let inv_a = a.map_or(DMat4::IDENTITY, |a| rigid_inverse(&frame[a]));
-                let mut v = vec![(None, cur, inv_a * cur)];
-                if let (Some(grid), Some(cloud)) =
-                    (self.grids.get(t).and_then(Option::as_ref), frames.get(t))
-                {
-                    let fit_now = trimmed_fit(grid, pts, &cur, POLISH_KEEP, &mut buf);
-                    fits[t] = fit_now;
-                    for f in &turns {
-                        let mo = polish_pose(grid, cloud, pts, &(cur * *f), &mut dst);
-                        if fits_cloud(Some(grid), pts, &mo, fit_now, &mut buf) {
-                            v.push((Some(*f), mo, inv_a * mo));
-                        }
-                    }
-                }
-                variants.push(v);
-            }
-            let mut measured: Vec<f64> = fits.iter().copied().filter(|f| f.is_finite()).collect();
-            let spins = if measured.is_empty() {
-                Vec::new()
-            } else {
-                spin_axes(pts, c, &axes, median(&mut measured))
-            };
-            let Some(a) = a else {
-                flips.extend(still_root(
-                    motions,
-                    b,
-                    &variants,
-                    &spins,
-                    c,
-                    canonical,
-                    &mut |t, mo| fits_cloud(self.grids[t].as_ref(), pts, mo, fits[t], &mut buf),
-                ));
-                continue;
-            };
-            let reference = extents[b].centre;
-            let mut hyps = Vec::new();
-            // Only current motions propose screws: a half-turned one would propose the
-            // half-turn itself as the joint's motion (a symmetric panda finger "hinged"
-            // half a turn in one frame explains that frame exactly). A part symmetric
-            // about an axis also proposes the hinge its axis follows.
-            for (t, v) in variants.iter().enumerate() {
-                if t != canonical {
-                    hypotheses(&v[0].2, reference, &mut hyps);
-                }
-            }
-            let current: Vec<DMat4> = variants.iter().map(|v| v[0].2).collect();
-            hyps.extend(
-                spins
-                    .iter()
-                    .filter_map(|&s| cone_hinge(&current, s, c, reference)),
+            let part = PartFrames::new(
+                motions,
+                a,
+                b,
+                pts,
+                self.frames,
+                &self.grids,
+                self.canonical,
+                (&mut dst, &mut buf),
             );
-            // A frame's candidates under screw `h`: its half-turns, and its turn about
-            // each symmetry axis that follows `h` (when it still fits the cloud).
-            let candidates =
-                |t: usize, h: Hypothesis, out: &mut Vec<Variant>, buf: &mut Vec<f64>| {
-                    out.clear();
-                    out.extend_from_slice(&variants[t]);
-                    let (cur, rel) = (variants[t][0].1, variants[t][0].2);
-                    for &s in &spins {
-                        if let Some(f) = spin_for(&rel, h, s, c) {
-                            let mo = cur * f;
-                            if fits_cloud(self.grids[t].as_ref(), pts, &mo, fits[t], buf) {
-                                out.push((Some(f), mo, rel * f));
-                            }
-                        }
-                    }
-                };
-            let (mut res, mut cand) = (Vec::with_capacity(k), Vec::new());
-            let mut score = |h: Hypothesis, res: &mut Vec<f64>| {
-                res.clear();
-                for t in 0..k {
-                    if t != canonical {
-                        candidates(t, h, &mut cand, &mut buf);
-                        res.push(
-                            cand.iter()
-                                .map(|x| residual(&x.2, h))
-                                .fold(f64::INFINITY, f64::min),
-                        );
-                    }
-                }
-                trimmed_sum(res)
-            };
-            let Some(best) = hyps
-                .iter()
-                .map(|&h| (h, score(h, &mut res)))
-                .min_by(|x, y| x.1.total_cmp(&y.1))
-                .map(|x| x.0)
-            else {
+            let Some(a) = a else {
+                flips.extend(part.still_root(motions, b, &mut buf));
                 continue;
             };
-            // Each frame's variant under the consensus screw.
-            let mut cand = Vec::new();
-            let chosen: Vec<Variant> = (0..k)
-                .map(|t| {
-                    candidates(t, best, &mut cand, &mut buf);
-                    let r: Vec<f64> = cand.iter().map(|x| residual(&x.2, best)).collect();
-                    let (j, rj) = r
-                        .iter()
-                        .enumerate()
-                        .min_by(|x, y| x.1.total_cmp(y.1))
-                        .map_or((0, 0.0), |(j, &rj)| (j, rj));
-                    if t != canonical
-                        && j > 0
-                        && SWITCH_GAIN * rj < r[0]
-                        && r[0] > MIN_SWITCH_RESIDUAL
-                    {
-                        cand[j]
-                    } else {
-                        cand[0]
-                    }
-                })
-                .collect();
-            let keep = !chosen.iter().all(|x| x.0.is_none()) && {
-                let before = fit_screw(&current, extents[b]).loss;
-                let after_rel: Vec<DMat4> = chosen.iter().map(|x| x.2).collect();
-                KEEP_GAIN * fit_screw(&after_rel, extents[b]).loss < before
+            let Some(best) = part.consensus(extents[b].centre, &mut buf) else {
+                continue;
             };
-            if keep {
-                for (t, x) in chosen.iter().enumerate() {
-                    if let (Some(f), mo, _) = *x {
-                        motions[t][b] = mo;
-                        flips.push(Flip {
-                            frame: t,
-                            part: b,
-                            flip: f,
-                            swept: false,
-                        });
-                    }
-                }
-            }
+            flips.extend(part.switch(motions, b, best, extents[b], &mut buf));
             // Then each frame's pose is searched again along the consensus screw,
             // once per parent.
             if self.swept_under[b] != Some(a) {
@@ -528,7 +406,7 @@ impl<'a> Repair<'a> {
                     b,
                     best,
                     pts,
-                    frames,
+                    self.frames,
                     &self.grids,
                     &mut dst,
                     &mut buf,
@@ -536,6 +414,209 @@ impl<'a> Repair<'a> {
             }
         }
         flips
+    }
+}
+
+/// One part's poses in a round of the repair: its canonical points (centroid `c`),
+/// its symmetry axes, every frame's variants (the current pose first, then the
+/// half-turns that fit the cloud) and the current pose's fit to each frame's cloud.
+struct PartFrames<'r> {
+    pts: &'r [DVec3],
+    c: DVec3,
+    spins: Vec<DVec3>,
+    variants: Vec<Vec<Variant>>,
+    fits: Vec<f64>,
+    grids: &'r [Option<Grid>],
+    canonical: usize,
+}
+
+impl<'r> PartFrames<'r> {
+    /// Part `b`'s variants in every frame, relative to parent `a` (none: the world).
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        motions: &[Vec<DMat4>],
+        a: Option<usize>,
+        b: usize,
+        pts: &'r [DVec3],
+        frames: &[Vec<Vec3>],
+        grids: &'r [Option<Grid>],
+        canonical: usize,
+        (dst, buf): (&mut Vec<DVec3>, &mut Vec<f64>),
+    ) -> Self {
+        let k = motions.len();
+        let (c, axes) = principal_axes(pts);
+        let turns = half_turns(c, &axes);
+        let mut variants: Vec<Vec<Variant>> = Vec::with_capacity(k);
+        let mut fits = vec![f64::INFINITY; k];
+        for (t, frame) in motions.iter().enumerate() {
+            let cur = frame[b];
+            let inv_a = a.map_or(DMat4::IDENTITY, |a| rigid_inverse(&frame[a]));
+            let mut v = vec![(None, cur, inv_a * cur)];
+            if let (Some(grid), Some(cloud)) =
+                (grids.get(t).and_then(Option::as_ref), frames.get(t))
+            {
+                let fit_now = trimmed_fit(grid, pts, &cur, POLISH_KEEP, buf);
+                fits[t] = fit_now;
+                for f in &turns {
+                    let mo = polish_pose(grid, cloud, pts, &(cur * *f), dst);
+                    if fits_cloud(Some(grid), pts, &mo, fit_now, buf) {
+                        v.push((Some(*f), mo, inv_a * mo));
+                    }
+                }
+            }
+            variants.push(v);
+        }
+        let mut measured: Vec<f64> = fits.iter().copied().filter(|f| f.is_finite()).collect();
+        let spins = if measured.is_empty() {
+            Vec::new()
+        } else {
+            spin_axes(pts, c, &axes, median(&mut measured))
+        };
+        PartFrames {
+            pts,
+            c,
+            spins,
+            variants,
+            fits,
+            grids,
+            canonical,
+        }
+    }
+
+    /// Whether pose `mo` fits frame `t`'s cloud about as well as the current pose.
+    fn fits(&self, t: usize, mo: &DMat4, buf: &mut Vec<f64>) -> bool {
+        fits_cloud(self.grids[t].as_ref(), self.pts, mo, self.fits[t], buf)
+    }
+
+    /// The root's repair (`still_root`).
+    fn still_root(&self, motions: &mut [Vec<DMat4>], b: usize, buf: &mut Vec<f64>) -> Vec<Flip> {
+        still_root(
+            motions,
+            b,
+            &self.variants,
+            &self.spins,
+            self.c,
+            self.canonical,
+            &mut |t, mo| self.fits(t, mo, buf),
+        )
+    }
+
+    /// Frame `t`'s candidates under screw `h`: its variants, and its turn about each
+    /// symmetry axis that follows `h` (when it still fits the cloud).
+    fn candidates(&self, t: usize, h: Hypothesis, out: &mut Vec<Variant>, buf: &mut Vec<f64>) {
+        out.clear();
+        out.extend_from_slice(&self.variants[t]);
+        let (cur, rel) = (self.variants[t][0].1, self.variants[t][0].2);
+        for &s in &self.spins {
+            if let Some(f) = spin_for(&rel, h, s, self.c) {
+                let mo = cur * f;
+                if self.fits(t, &mo, buf) {
+                    out.push((Some(f), mo, rel * f));
+                }
+            }
+        }
+    }
+
+    /// The relative motions to the parent, as they are.
+    fn current(&self) -> Vec<DMat4> {
+        self.variants.iter().map(|v| v[0].2).collect()
+    }
+
+    /// The consensus screw: of the screws the current relative motions (and the cones
+    /// of the symmetry axes) propose, the one with the least trimmed sum over the
+    /// frames of the best candidate's residual. `reference`: the part's centre.
+    fn consensus(&self, reference: DVec3, buf: &mut Vec<f64>) -> Option<Hypothesis> {
+        let mut hyps = Vec::new();
+        // Only current motions propose screws: a half-turned one would propose the
+        // half-turn itself as the joint's motion (a symmetric panda finger "hinged"
+        // half a turn in one frame explains that frame exactly). A part symmetric
+        // about an axis also proposes the hinge its axis follows.
+        for (t, v) in self.variants.iter().enumerate() {
+            if t != self.canonical {
+                hypotheses(&v[0].2, reference, &mut hyps);
+            }
+        }
+        let current = self.current();
+        hyps.extend(
+            self.spins
+                .iter()
+                .filter_map(|&s| cone_hinge(&current, s, self.c, reference)),
+        );
+        let (mut res, mut cand) = (Vec::with_capacity(self.variants.len()), Vec::new());
+        let mut score = |h: Hypothesis| {
+            res.clear();
+            for t in 0..self.variants.len() {
+                if t != self.canonical {
+                    self.candidates(t, h, &mut cand, buf);
+                    res.push(
+                        cand.iter()
+                            .map(|x| residual(&x.2, h))
+                            .fold(f64::INFINITY, f64::min),
+                    );
+                }
+            }
+            trimmed_sum(&mut res)
+        };
+        hyps.iter()
+            .map(|&h| (h, score(h)))
+            .min_by(|x, y| x.1.total_cmp(&y.1))
+            .map(|x| x.0)
+    }
+
+    /// Under the consensus screw `best`, each frame takes the candidate with the
+    /// least residual when it lowers the current one `SWITCH_GAIN`-fold from above
+    /// `MIN_SWITCH_RESIDUAL`; the switches are written to `motions[t][b]` when they
+    /// lower the child's screw fit `KEEP_GAIN`-fold. Returns them.
+    fn switch(
+        &self,
+        motions: &mut [Vec<DMat4>],
+        b: usize,
+        best: Hypothesis,
+        extent: PartExtent,
+        buf: &mut Vec<f64>,
+    ) -> Vec<Flip> {
+        let mut cand = Vec::new();
+        let chosen: Vec<Variant> = (0..self.variants.len())
+            .map(|t| {
+                self.candidates(t, best, &mut cand, buf);
+                let r: Vec<f64> = cand.iter().map(|x| residual(&x.2, best)).collect();
+                let (j, rj) = r
+                    .iter()
+                    .enumerate()
+                    .min_by(|x, y| x.1.total_cmp(y.1))
+                    .map_or((0, 0.0), |(j, &rj)| (j, rj));
+                if t != self.canonical
+                    && j > 0
+                    && SWITCH_GAIN * rj < r[0]
+                    && r[0] > MIN_SWITCH_RESIDUAL
+                {
+                    cand[j]
+                } else {
+                    cand[0]
+                }
+            })
+            .collect();
+        let keep = !chosen.iter().all(|x| x.0.is_none()) && {
+            let before = fit_screw(&self.current(), extent).loss;
+            let after_rel: Vec<DMat4> = chosen.iter().map(|x| x.2).collect();
+            KEEP_GAIN * fit_screw(&after_rel, extent).loss < before
+        };
+        if !keep {
+            return Vec::new();
+        }
+        let mut out = Vec::new();
+        for (t, x) in chosen.iter().enumerate() {
+            if let (Some(f), mo, _) = *x {
+                motions[t][b] = mo;
+                out.push(Flip {
+                    frame: t,
+                    part: b,
+                    flip: f,
+                    swept: false,
+                });
+            }
+        }
+        out
     }
 }
 
