@@ -361,7 +361,7 @@ pub fn finish(
     }
     if kin.swept > 0 {
         notes.push(format!(
-            "{} part poses were replaced by a better fit found along their joints",
+            "{} part poses were replaced by a pose found along their joints (a better fit to the cloud, or one as good on a smoother path of joint states)",
             kin.swept
         ));
     }

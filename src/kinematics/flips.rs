@@ -86,6 +86,24 @@ pub struct Flip {
     pub swept: bool,
 }
 
+/// Sets `motions[t][b]` to `mo`, which is the old motion followed by `flip` (a map of
+/// the canonical frame), and returns the replacement.
+pub(crate) fn replace(
+    motions: &mut [Vec<DMat4>],
+    (t, b): (usize, usize),
+    mo: DMat4,
+    flip: DMat4,
+    swept: bool,
+) -> Flip {
+    motions[t][b] = mo;
+    Flip {
+        frame: t,
+        part: b,
+        flip,
+        swept,
+    }
+}
+
 /// Σ (p − mean)(p − mean)ᵀ over `pts`.
 fn scatter(pts: &[DVec3], mean: DVec3) -> Matrix3<f64> {
     pts.iter().fold(Matrix3::zeros(), |m, p| {
@@ -299,13 +317,7 @@ fn still_root(
             .min_by(|x, y| dev_from_identity(&x.1).total_cmp(&dev_from_identity(&y.1)))
         {
             if SWITCH_GAIN * dev_from_identity(&mo) < d0 {
-                motions[t][b] = mo;
-                out.push(Flip {
-                    frame: t,
-                    part: b,
-                    flip: f,
-                    swept: false,
-                });
+                out.push(replace(motions, (t, b), mo, f, false));
             }
         }
     }
@@ -604,19 +616,11 @@ impl<'r> PartFrames<'r> {
         if !keep {
             return Vec::new();
         }
-        let mut out = Vec::new();
-        for (t, x) in chosen.iter().enumerate() {
-            if let (Some(f), mo, _) = *x {
-                motions[t][b] = mo;
-                out.push(Flip {
-                    frame: t,
-                    part: b,
-                    flip: f,
-                    swept: false,
-                });
-            }
-        }
-        out
+        chosen
+            .iter()
+            .enumerate()
+            .filter_map(|(t, x)| x.0.map(|f| replace(motions, (t, b), x.1, f, false)))
+            .collect()
     }
 }
 

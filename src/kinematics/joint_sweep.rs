@@ -11,27 +11,40 @@
 //! one most frames follow wins), the state along it is swept in every frame (a full
 //! turn for a hinge; for a slide, the frames' range widened by half its span on each
 //! side). The best local minima of the cloud fit are polished by trimmed ICP, as the
-//! reported poses are, and the best polished pose replaces the current one when it
-//! fits the frame's cloud `SWITCH_FIT` times better (trimmed mean squared distance)
-//! than the current pose polished the same way, and lies elsewhere (its points
-//! further from the polished current pose, on average, than that pose's typical
-//! distance to the cloud) — a pose from another basin, not the polish alone. Parents
-//! are swept before their children, so a child is judged against its parent's new
+//! reported poses are. A polished pose from another basin (its points further from the
+//! current pose, polished the same way, on average, than that pose's typical distance
+//! to the cloud) may replace the current pose when it fits the frame's cloud (trimmed
+//! mean squared distance) within 1 / `SWITCH_FIT` of the frame's best fit; the
+//! current pose stays allowed unless a swept pose fits `SWITCH_FIT` times better than
+//! it. Among the allowed poses, each frame takes the one on the path through the
+//! frames with the least sum of squared changes of state between consecutive frames
+//! (`smoothest`; squared, so one jump costs more than the steps that make it up;
+//! each replaced pose adds `MIN_SMOOTHING`, so a path must be clearly smoother):
+//! where the clouds cannot tell poses apart (a link that looks about the same at any
+//! turn about its own hinge, as bench-dev xarm7's last one does), the joint's
+//! trajectory decides, the frames of a sequence being in time order. Parents are
+//! swept before their children, so a child is judged against its parent's new
 //! motion. On full input only, like the rest of the repair.
 
 use glam::{DMat4, DVec3, Vec3};
 
-use super::flips::{state_of, turn_about, Flip, Hypothesis};
+use super::flips::{replace, state_of, turn_about, Flip, Hypothesis};
 use super::observed::{polish_pose, trimmed_fit, POLISH_KEEP};
 use crate::geom::knn::Grid;
 use crate::geom::se3::rigid_inverse;
 use crate::io::gt::JointType;
 
-/// A swept pose replaces the current one when, both polished, its fit to the
-/// frame's cloud is below this fraction of the current pose's. Measured (bench-dev
-/// full, fast, seeds 0–4; recon / flow / TED / re-animation): 0.8: 0.873 / 0.879 /
-/// 2.34 / 2.33; 1.0 (any better fit): 0.846 / 0.835 / 2.46 / 2.34; without the sweep
-/// 0.959 / 0.997 / 2.26 / 2.51.
+/// The current pose must be replaced when a swept pose's fit to the frame's cloud
+/// (both polished) is below this fraction of its fit, and a swept pose may replace
+/// it when its fit is within the inverse of this of the frame's best. Measured
+/// (bench-dev full, fast, seeds 0–4; recon / flow / TED / re-animation) when the
+/// best swept pose replaced the current one (before `smoothest`): 0.8: 0.873 /
+/// 0.879 / 2.34 / 2.33; 1.0 (any better fit): 0.846 / 0.835 / 2.46 / 2.34; without
+/// the sweep 0.959 / 0.997 / 2.26 / 2.51. With `smoothest` (squared changes and
+/// `MIN_SMOOTHING`): 0.834 / 0.788 / 2.31 / 2.26; without `MIN_SMOOTHING` 0.807 /
+/// 0.764 / 2.29 / 2.27; with the sum of absolute changes 0.809 / 0.780 / 2.40 /
+/// 2.29, and with it allowing only poses within 1 / 0.9 of the best (the current
+/// pose still within 1 / 0.8) 0.829 / 0.779 / 2.31 / 2.28.
 pub const SWITCH_FIT: f64 = 0.8;
 /// Steps of the coarse sweep along a joint (5° for a hinge).
 const STEPS: usize = 72;
@@ -42,6 +55,11 @@ const CANDIDATES: usize = 3;
 /// Points of the part scored during the sweep (an even subsample); the polish and
 /// the comparison with the current pose use all of them.
 const PROBE: usize = 256;
+/// A replaced pose must lower the path's sum of squared state changes by this much
+/// (a step of half a radian, or of half the part's RMS radius along a slide): on
+/// exact motions, a link that looks the same at any turn about its hinge (bench-dev
+/// xarm7's last one) is left where it is, not moved to a slightly smoother path.
+const MIN_SMOOTHING: f64 = 0.25;
 /// Least slide range (fit units) swept for a prismatic joint.
 const MIN_SLIDE: f64 = 1e-3;
 
@@ -113,11 +131,11 @@ fn sweep(
 }
 
 /// Sweeps child `b` of part `a` along screw `h` in every frame (module doc),
-/// replacing `motions[t][b]` (frame canonical → t) where the swept pose fits
-/// clearly better. `pts`: the child's canonical points; `frames[t]`: every frame's
-/// cloud and `grids[t]` its grid (none for the canonical frame). Returns the
-/// replaced motions, each as the rigid map of the canonical frame applied after the
-/// old motion.
+/// replacing `motions[t][b]` (frame canonical → t) where a swept pose fits clearly
+/// better, or about as well and on a clearly smoother path of states. `pts`: the
+/// child's canonical points; `frames[t]`: every frame's cloud and `grids[t]` its grid
+/// (none for the canonical frame). Returns the replaced motions, each as the rigid
+/// map of the canonical frame applied after the old motion.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sweep_child(
     motions: &mut [Vec<DMat4>],
@@ -136,12 +154,23 @@ pub(crate) fn sweep_child(
         .collect();
     let step = pts.len().div_ceil(PROBE).max(1);
     let probe: Vec<DVec3> = pts.iter().step_by(step).copied().collect();
-    let mut out = Vec::new();
+    let revolute = h.0 == JointType::Revolute;
+    // A slide's states are compared in units of the part's size, a hinge's in radians.
+    let scale = if revolute { 1.0 } else { rms_radius(pts) };
+    // Per frame, the poses it may take: the current one first, then the swept poses
+    // from other basins that fit the cloud within 1 / SWITCH_FIT of the frame's best.
+    let mut options: Vec<Vec<Choice>> = Vec::with_capacity(motions.len());
     for (t, cloud) in frames.iter().enumerate() {
+        let (pa, cur) = (motions[t][a], motions[t][b]);
+        let mine = Choice {
+            mo: cur,
+            state: states[t] / scale,
+            cost: 0.0,
+        };
         let Some(grid) = grids.get(t).and_then(Option::as_ref) else {
+            options.push(vec![mine]);
             continue;
         };
-        let (pa, cur) = (motions[t][a], motions[t][b]);
         let polish = |start: DMat4, dst: &mut Vec<DVec3>, buf: &mut Vec<f64>| {
             let mo = polish_pose(grid, cloud, pts, &start, dst);
             (trimmed_fit(grid, pts, &mo, POLISH_KEEP, buf), mo)
@@ -149,14 +178,9 @@ pub(crate) fn sweep_child(
         // The current pose is judged polished as the candidates are, so that a
         // candidate must come from a better basin, not just from the polish.
         let (fit_now, now) = polish(cur, dst, buf);
-        let mut best: Option<(f64, DMat4)> = None;
+        let mut swept: Vec<(f64, DMat4)> = Vec::new();
         for q in sweep(grid, &probe, &pa, h, &states, buf) {
             let (f, mo) = polish(pa * q, dst, buf);
-            if best.is_none_or(|x| f < x.0) {
-                best = Some((f, mo));
-            }
-        }
-        if let Some((f, mo)) = best {
             // Another basin: the part's points sit further from the polished current
             // pose, on average, than the current fit's typical distance.
             let moved = pts
@@ -164,18 +188,122 @@ pub(crate) fn sweep_child(
                 .map(|x| mo.transform_point3(*x).distance(now.transform_point3(*x)))
                 .sum::<f64>()
                 / pts.len() as f64;
-            if f < SWITCH_FIT * fit_now && moved > fit_now.sqrt() {
-                motions[t][b] = mo;
-                out.push(Flip {
-                    frame: t,
-                    part: b,
-                    flip: rigid_inverse(&cur) * mo,
-                    swept: true,
-                });
+            if moved > fit_now.sqrt() {
+                swept.push((f, mo));
             }
+        }
+        let best = swept.iter().map(|x| x.0).fold(fit_now, f64::min);
+        let mut opts = Vec::new();
+        if SWITCH_FIT * fit_now <= best {
+            opts.push(mine);
+        }
+        let inv_pa = rigid_inverse(&pa);
+        opts.extend(
+            swept
+                .iter()
+                .filter(|x| SWITCH_FIT * x.0 <= best)
+                .map(|&(_, mo)| Choice {
+                    mo,
+                    state: state_of(&(inv_pa * mo), h) / scale,
+                    cost: MIN_SMOOTHING,
+                }),
+        );
+        if opts.is_empty() {
+            // Fits that do not compare (not finite): keep the pose.
+            opts.push(mine);
+        }
+        options.push(opts);
+    }
+    let path = smoothest(&options, revolute);
+    let mut out = Vec::new();
+    for (t, (opts, &i)) in options.iter().zip(&path).enumerate() {
+        let cur = motions[t][b];
+        let mo = opts[i].mo;
+        if mo != cur {
+            out.push(replace(motions, (t, b), mo, rigid_inverse(&cur) * mo, true));
         }
     }
     out
+}
+
+/// A pose a frame may take in the sweep: the motion and its state along the screw.
+#[derive(Clone, Copy)]
+struct Choice {
+    mo: DMat4,
+    /// Radians for a hinge; for a slide, in units of the part's RMS radius.
+    state: f64,
+    /// Added to the path's cost when taken: 0 for the current pose.
+    cost: f64,
+}
+
+/// RMS distance of `pts` from their centroid (at least 1e-6).
+fn rms_radius(pts: &[DVec3]) -> f64 {
+    if pts.is_empty() {
+        return 1.0;
+    }
+    let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
+    let r = (pts.iter().map(|p| p.distance_squared(c)).sum::<f64>() / pts.len() as f64).sqrt();
+    r.max(1e-6)
+}
+
+/// Absolute difference of two states, a hinge's taken the short way round (≤ π).
+fn state_gap(x: f64, y: f64, revolute: bool) -> f64 {
+    let d = x - y;
+    if revolute {
+        (d + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
+    } else {
+        d
+    }
+    .abs()
+}
+
+/// One option per frame (indices into `options[t]`, each non-empty) with the least
+/// sum of the options' costs and the squared state changes between consecutive
+/// frames (dynamic programming); ties keep the earlier option. Squared: with
+/// the sum of changes, a hinge swinging back and forth (a cabinet door) lost to one
+/// jump onto a pose that fits as well and stays put (the door folded onto the body).
+fn smoothest(options: &[Vec<Choice>], revolute: bool) -> Vec<usize> {
+    let k = options.len();
+    if k == 0 {
+        return Vec::new();
+    }
+    let mut cost: Vec<Vec<f64>> = vec![options[0].iter().map(|o| o.cost).collect()];
+    let mut back: Vec<Vec<usize>> = vec![vec![0; options[0].len()]];
+    for t in 1..k {
+        let (c, b): (Vec<f64>, Vec<usize>) = options[t]
+            .iter()
+            .map(|o| {
+                options[t - 1]
+                    .iter()
+                    .enumerate()
+                    .map(|(j, p)| {
+                        (
+                            cost[t - 1][j] + o.cost + state_gap(o.state, p.state, revolute).powi(2),
+                            j,
+                        )
+                    })
+                    .fold(
+                        (f64::INFINITY, 0),
+                        |acc, x| if x.0 < acc.0 { x } else { acc },
+                    )
+            })
+            .unzip();
+        cost.push(c);
+        back.push(b);
+    }
+    let mut path = vec![0; k];
+    path[k - 1] = cost[k - 1]
+        .iter()
+        .enumerate()
+        .fold(
+            (f64::INFINITY, 0),
+            |acc, (i, &x)| if x < acc.0 { (x, i) } else { acc },
+        )
+        .1;
+    for t in (1..k).rev() {
+        path[t - 1] = back[t][path[t]];
+    }
+    path
 }
 
 #[cfg(test)]
@@ -183,6 +311,14 @@ mod tests {
     use super::*;
     use crate::kinematics::flips::repair_flips;
     use crate::kinematics::flips::tests::{posed, rod_extents, scene_sampled, turn};
+    use crate::kinematics::screw::PartExtent;
+
+    /// The frames of `flips`, in order.
+    fn frames_of(flips: &[Flip]) -> Vec<usize> {
+        let mut f: Vec<usize> = flips.iter().map(|f| f.frame).collect();
+        f.sort_unstable();
+        f
+    }
 
     /// Largest distance between the rod's points moved by `mo` and by `truth`.
     fn rod_error(pts: &[glam::Vec3], labels: &[u32], mo: &DMat4, truth: &DMat4) -> f64 {
@@ -217,9 +353,7 @@ mod tests {
         motions[4][1] = hinge(-1.1);
         motions[6][1] = DMat4::from_translation(DVec3::new(0.08, 0.0, 0.0)) * truth[6];
         let swept = repair_flips(&mut motions, &[-1, 0], 0, &pts, &labels, &frames, &extents);
-        let mut fixed: Vec<usize> = swept.iter().map(|f| f.frame).collect();
-        fixed.sort_unstable();
-        assert_eq!(fixed, vec![4, 6]);
+        assert_eq!(frames_of(&swept), vec![4, 6]);
         // Within a sixth of the rod's radius at every rod point (the polish fits a
         // fresh sample of a nearly symmetric rod).
         for t in [4, 6] {
@@ -255,5 +389,92 @@ mod tests {
             let err = rod_error(&pts, &labels, &motions[t][1], &truth[t]);
             assert!(err < 0.01, "frame {t}: rod points off by up to {err}");
         }
+    }
+
+    /// A base box and a flat bar lying across a hinge (the z axis) at height 0.2:
+    /// half a turn about the hinge maps the bar onto itself. `seed` draws the bar's
+    /// points afresh.
+    fn propeller(seed: u64) -> (Vec<glam::Vec3>, Vec<u32>) {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
+        let mut pts = Vec::new();
+        let mut labels = Vec::new();
+        for i in 0..10 {
+            for j in 0..10 {
+                for z in [0.0, 0.1] {
+                    pts.push(glam::Vec3::new(
+                        i as f32 * 0.04 - 0.2,
+                        j as f32 * 0.04 - 0.2,
+                        z,
+                    ));
+                    labels.push(0);
+                }
+            }
+        }
+        for _ in 0..300 {
+            let (x, y): (f32, f32) = (rng.random(), rng.random());
+            pts.push(glam::Vec3::new(0.4 * x - 0.2, 0.04 * y - 0.02, 0.2));
+            labels.push(1);
+        }
+        (pts, labels)
+    }
+
+    #[test]
+    fn a_state_the_clouds_cannot_tell_follows_its_neighbours() {
+        let (pts, labels) = propeller(400);
+        let hinge = |q: f64| turn(DVec3::Z, q, DVec3::ZERO);
+        let states = [0.0, 0.2, 0.4, 0.6, 0.8, 0.6, 0.4, 0.2];
+        let truth: Vec<DMat4> = states.iter().map(|&q| hinge(q)).collect();
+        let frames = posed(&truth, |t| propeller(400 + t as u64));
+        let mut motions: Vec<Vec<DMat4>> =
+            truth.iter().map(|m| vec![DMat4::IDENTITY, *m]).collect();
+        // Frames 3 and 4 half a turn off about the hinge: the clouds fit as well.
+        motions[3][1] = hinge(states[3] + std::f64::consts::PI);
+        motions[4][1] = hinge(states[4] + std::f64::consts::PI);
+        let extents = vec![
+            PartExtent::default(),
+            PartExtent {
+                centre: DVec3::new(0.0, 0.0, 0.2),
+                radius: 0.2,
+            },
+        ];
+        let swept = repair_flips(&mut motions, &[-1, 0], 0, &pts, &labels, &frames, &extents);
+        assert_eq!(frames_of(&swept), vec![3, 4]);
+        for t in [3, 4] {
+            let err = rod_error(&pts, &labels, &motions[t][1], &truth[t]);
+            assert!(err < 0.01, "frame {t}: bar points off by up to {err}");
+        }
+    }
+
+    #[test]
+    fn the_smoothest_path_takes_the_least_state_change() {
+        let o = |s: &[f64]| -> Vec<Choice> {
+            s.iter()
+                .enumerate()
+                .map(|(i, &state)| Choice {
+                    mo: DMat4::IDENTITY,
+                    state,
+                    // The first option is the current pose.
+                    cost: if i == 0 { 0.0 } else { MIN_SMOOTHING },
+                })
+                .collect()
+        };
+        // Each frame's second option is half a turn off.
+        let opts = vec![o(&[0.0]), o(&[0.1, 3.2]), o(&[3.3, 0.2]), o(&[0.3])];
+        assert_eq!(smoothest(&opts, true), vec![0, 0, 1, 0]);
+        // A hinge's states wrap: 3.1 and −3.1 are 0.08 apart.
+        let opts = vec![o(&[3.1]), o(&[0.0, -3.1])];
+        assert_eq!(smoothest(&opts, true), vec![0, 1]);
+        // A slide's do not.
+        let opts = vec![o(&[3.1]), o(&[0.0, -3.1])];
+        assert_eq!(smoothest(&opts, false), vec![0, 0]);
+        // Ties keep the first option (the current pose).
+        let opts = vec![o(&[0.0]), o(&[0.5, -0.5])];
+        assert_eq!(smoothest(&opts, true), vec![0, 0]);
+        // A replacement that smooths the path by less than `MIN_SMOOTHING` is not
+        // taken (0.36 + 0.16 against 0.25 + 0.25 + 0.25).
+        let opts = vec![o(&[0.0]), o(&[0.6, 0.5]), o(&[1.0])];
+        assert_eq!(smoothest(&opts, true), vec![0, 0, 0]);
+        assert!(smoothest(&[], true).is_empty());
     }
 }
