@@ -273,37 +273,32 @@ fn smoothest(options: &[Vec<Choice>], revolute: bool) -> Vec<usize> {
         let (c, b): (Vec<f64>, Vec<usize>) = options[t]
             .iter()
             .map(|o| {
-                options[t - 1]
-                    .iter()
-                    .enumerate()
-                    .map(|(j, p)| {
-                        (
-                            cost[t - 1][j] + o.cost + state_gap(o.state, p.state, revolute).powi(2),
-                            j,
-                        )
-                    })
-                    .fold(
-                        (f64::INFINITY, 0),
-                        |acc, x| if x.0 < acc.0 { x } else { acc },
-                    )
+                argmin(
+                    options[t - 1]
+                        .iter()
+                        .zip(&cost[t - 1])
+                        .map(|(p, &c)| c + o.cost + state_gap(o.state, p.state, revolute).powi(2)),
+                )
             })
             .unzip();
         cost.push(c);
         back.push(b);
     }
     let mut path = vec![0; k];
-    path[k - 1] = cost[k - 1]
-        .iter()
-        .enumerate()
-        .fold(
-            (f64::INFINITY, 0),
-            |acc, (i, &x)| if x < acc.0 { (x, i) } else { acc },
-        )
-        .1;
+    path[k - 1] = argmin(cost[k - 1].iter().copied()).1;
     for t in (1..k).rev() {
         path[t - 1] = back[t][path[t]];
     }
     path
+}
+
+/// The least value and its index, the first of equal ones ((∞, 0) when none is
+/// below infinity).
+fn argmin(values: impl Iterator<Item = f64>) -> (f64, usize) {
+    values.enumerate().fold(
+        (f64::INFINITY, 0),
+        |acc, (i, x)| if x < acc.0 { (x, i) } else { acc },
+    )
 }
 
 #[cfg(test)]

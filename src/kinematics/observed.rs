@@ -208,17 +208,7 @@ pub fn polish_motions(
                 continue;
             }
             let start = *pose;
-            let from = (DMat3::from_mat4(start), start.w_axis.truncate());
-            let (r, tr) = trimmed_icp(
-                &grid,
-                |j| cloud[j].as_dvec3(),
-                pts,
-                from,
-                rounds,
-                keep,
-                &mut dst,
-            );
-            let mo = rigid(r, tr);
+            let mo = icp_pose(&grid, cloud, pts, &start, (rounds, keep), &mut dst);
             let before = trimmed_fit(&grid, pts, &start, keep, &mut buf);
             if trimmed_fit(&grid, pts, &mo, keep, &mut buf) < (1.0 - gain) * before {
                 *pose = mo;
@@ -238,6 +228,21 @@ pub(crate) fn points_by_part(points: &[Vec3], labels: &[u32], parts: usize) -> V
     by_part
 }
 
+/// `start` moved by trimmed ICP of `pts` against `cloud` (`grid` its grid), with
+/// (rounds, kept fraction) `rounds_keep`.
+fn icp_pose(
+    grid: &Grid,
+    cloud: &[Vec3],
+    pts: &[DVec3],
+    start: &DMat4,
+    (rounds, keep): (usize, f64),
+    dst: &mut Vec<DVec3>,
+) -> DMat4 {
+    let from = (DMat3::from_mat4(*start), start.w_axis.truncate());
+    let (r, tr) = trimmed_icp(grid, |j| cloud[j].as_dvec3(), pts, from, rounds, keep, dst);
+    rigid(r, tr)
+}
+
 /// `start` polished against `cloud` (`grid` its grid) by trimmed ICP of `pts`, as the
 /// reported poses are (`POLISH_ROUNDS`, `POLISH_KEEP`).
 pub(crate) fn polish_pose(
@@ -247,17 +252,7 @@ pub(crate) fn polish_pose(
     start: &DMat4,
     dst: &mut Vec<DVec3>,
 ) -> DMat4 {
-    let from = (DMat3::from_mat4(*start), start.w_axis.truncate());
-    let (r, tr) = trimmed_icp(
-        grid,
-        |j| cloud[j].as_dvec3(),
-        pts,
-        from,
-        POLISH_ROUNDS,
-        POLISH_KEEP,
-        dst,
-    );
-    rigid(r, tr)
+    icp_pose(grid, cloud, pts, start, (POLISH_ROUNDS, POLISH_KEEP), dst)
 }
 
 /// Mean of the `keep` fraction of smallest squared distances from the moved points to
