@@ -229,7 +229,9 @@ fn main() {
                     &mut |_| Control::Continue,
                 )
                 .expect("fit");
-                select::candidate_result(&prep, &params, m, stats.iterations, 0.0)
+                let chamfer =
+                    gsart::fit::fitter::final_chamfer(&prep.data, &params, prep.occluded, 1024);
+                select::candidate_result(&prep, &params, chamfer, m, stats.iterations, 0.0)
             }
             None => gsart::pipeline::fit_step1(&seq, &opts, &|_| Control::Continue).expect("fit"),
         };

@@ -5,6 +5,7 @@ pub mod adam;
 pub mod fitter;
 pub mod flow;
 pub mod gaussians;
+pub mod hold_still;
 pub mod init;
 pub mod losses;
 pub mod motion_seg;

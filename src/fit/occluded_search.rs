@@ -306,7 +306,7 @@ pub fn search_poses_occluded(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::fit::pose_search::tests::{angle, hinge_with_normals, oracle_params};
     use glam::Vec3;
@@ -315,7 +315,7 @@ mod tests {
     /// frame: only the box faces turned towards the camera are kept (three of each
     /// box's six), so the arm's frame-0 faces are partly hidden in the other frames.
     /// Returns the frames and frame 0's labels.
-    fn occluded_hinge(angles: &[f64]) -> (Vec<Vec<Vec3>>, Vec<u32>) {
+    pub(crate) fn occluded_hinge(angles: &[f64]) -> (Vec<Vec<Vec3>>, Vec<u32>) {
         let views = [
             Vec3::new(0.3, 0.5, 1.0),
             Vec3::new(-0.2, -1.0, 0.4),
