@@ -353,6 +353,12 @@ pub fn finish(
         step1.candidates.iter().map(|c| c.0).collect::<Vec<_>>(),
         result.parts
     ));
+    if step1.held_still > 0 {
+        notes.push(format!(
+            "{} of {} Gaussians were held still in every frame (the frames agree better with no motion than with theirs)",
+            step1.held_still, step1.m
+        ));
+    }
     if kin.flips > 0 {
         notes.push(format!(
             "{} part poses were turned about an axis of their (nearly symmetric) part to follow their joints",
@@ -370,6 +376,7 @@ pub fn finish(
         "m": step1.m,
         "candidates": step1.candidates,
         "restarts": step1.restarts,
+        "held_still": step1.held_still,
         "final_chamfer": step1.final_chamfer,
         "occlusion_used": step1.occlusion_used,
         "normalisation": {"center": norm.center.to_array(), "scale": norm.scale},

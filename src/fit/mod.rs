@@ -49,5 +49,7 @@ pub struct Step1Result {
     pub candidates: Vec<(usize, f64)>,
     /// Fits per candidate (the best of them stands for its m).
     pub restarts: usize,
+    /// Gaussians held still in every frame (occluded input, `hold_still`).
+    pub held_still: usize,
     pub timings: Timings,
 }

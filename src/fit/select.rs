@@ -322,21 +322,19 @@ fn fit_once(
     // Chamfer rewards the sliding views that `hold_still` undoes (bench-dev occluded
     // solo12, m = 15: 5.3e-4 as fitted, 8.0e-4 held, and m = 10 then won).
     let chamfer = fitter::final_chamfer(&prep.data, &params, prep.occluded, 1024);
-    if prep.occluded {
-        hold_still::hold_still(&prep.data, &mut params);
-    }
+    let held = if prep.occluded {
+        hold_still::hold_still(&prep.data, &mut params)
+    } else {
+        0
+    };
     #[cfg(not(target_arch = "wasm32"))]
     let secs = t0.elapsed().as_secs_f64();
     #[cfg(target_arch = "wasm32")]
     let secs = 0.0;
-    Ok(candidate_result(
-        prep,
-        &params,
-        chamfer,
-        m,
-        stats.iterations,
-        secs,
-    ))
+    Ok(Step1Result {
+        held_still: held,
+        ..candidate_result(prep, &params, chamfer, m, stats.iterations, secs)
+    })
 }
 
 /// A fitted candidate as a `Step1Result`: its model (in input units), the labels of
@@ -372,6 +370,7 @@ pub fn candidate_result(
         m,
         candidates: vec![(m, final_chamfer)],
         restarts: 1,
+        held_still: 0,
         timings: Timings {
             total_s: secs,
             per_candidate: vec![(m, secs, iterations)],
