@@ -22,8 +22,8 @@ use glam::{DMat3, DVec3, Vec3};
 
 use super::fitter::Data;
 use super::gaussians::Params;
-use super::pose_init::{frame0_groups, relative_motion, set_relative_pose};
-use super::pose_search::Motion;
+use super::pose_init::{relative_motion, set_relative_pose};
+use super::pose_search::{frame0_start, Motion};
 use crate::geom::knn::Grid;
 
 /// Squared radius (normalised units²) of a Gaussian's region around its frame-0
@@ -82,18 +82,13 @@ fn agreement(data: &Data, region: &Grid, rel: &[Motion]) -> f64 {
 /// than its own motions; frame 0 is left unchanged. Returns the number held.
 pub fn hold_still(data: &Data, params: &mut Params) -> usize {
     let kk = data.k();
-    let m = params.layout.m;
-    if kk < 3 || m == 0 || data.frames[0].is_empty() {
+    // With two frames no frame t ≥ 1 has another to agree with.
+    if kk < 3 {
         return 0;
     }
-    let gs: Vec<Vec<_>> = (0..kk)
-        .map(|t| {
-            let mut g = Vec::new();
-            params.frame_into(t, &mut g);
-            g
-        })
-        .collect();
-    let groups = frame0_groups(data, &gs[0], POINTS);
+    let Some((g0, groups)) = frame0_start(data, params, POINTS) else {
+        return 0;
+    };
     let still: Vec<Motion> = vec![(DMat3::IDENTITY, DVec3::ZERO); kk];
     let mut held = 0;
     for (i, group) in groups.iter().enumerate() {
@@ -102,11 +97,11 @@ pub fn hold_still(data: &Data, params: &mut Params) -> usize {
         }
         let region = Grid::new(&group.iter().map(|p| p.as_vec3()).collect::<Vec<_>>());
         let own: Vec<Motion> = (0..kk)
-            .map(|t| relative_motion(&gs[0][i], &gs[t][i]))
+            .map(|t| relative_motion(&g0[i], &params.gauss(t, i)))
             .collect();
         if agreement(data, &region, &still) > agreement(data, &region, &own) + MARGIN {
             for (t, &mo) in still.iter().enumerate().skip(1) {
-                set_relative_pose(params, t, i, &gs[0][i], mo);
+                set_relative_pose(params, t, i, &g0[i], mo);
             }
             held += 1;
         }
