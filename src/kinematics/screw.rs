@@ -244,7 +244,7 @@ fn residuals(rel: &[DMat4], jt: JointType, axis: DVec3, pivot: DVec3, states: &[
 }
 
 /// Frames kept after dropping the `OUTLIER_FRACTION` with the largest residuals.
-fn inliers(res: &[f64]) -> Vec<bool> {
+pub(crate) fn inliers(res: &[f64]) -> Vec<bool> {
     let drop = (res.len() as f64 * OUTLIER_FRACTION).floor() as usize;
     let mut keep = vec![true; res.len()];
     if drop == 0 {
