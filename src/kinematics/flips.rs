@@ -27,7 +27,8 @@
 //! children, so a child is judged against its parent's repaired motion; the root,
 //! which has no parent, is held still where it is still in most frames
 //! (`still_root`). After its turns, each child's pose in every frame is searched
-//! again along the consensus screw (`joint_sweep`). Measured effects and the variants
+//! again along the consensus screw, and about its axis through the pivot the frames
+//! that follow it agree on (`refit_pivot`, `joint_sweep`). Measured effects and the variants
 //! tried are in the README ("Half-turn repair", "Joint sweep").
 
 use glam::{DMat3, DMat4, DVec3, Vec3};
