@@ -318,8 +318,8 @@ fn hypotheses(q: &DMat4, reference: DVec3, out: &mut Vec<Hypothesis>) {
 /// `MIN_SWITCH_RESIDUAL`, a turn above `MIN_TURN`) and was not just switched; `None`
 /// for a slide, with fewer than two such frames, or when the new pivot lies within
 /// `SAME_PIVOT` of the child's RMS `radius` of the old one across the axis (sweeping
-/// that hinge again finds the same poses: bench-dev full, fast, the eight `gsart bench`
-/// sequences, steps 2–3 18.4 → 15.0 s, the metrics within ±0.01).
+/// that hinge again finds the same poses: fast, the eight full `gsart bench`
+/// sequences, steps 2–3 18.4 → 15.0 s; bench-dev full metrics within ±0.015).
 ///
 /// The consensus screw is proposed by one frame, and its residual hardly weighs the
 /// pivot (a pivot 0.05 off moves a 0.4 rad turn's child by 0.02, a squared residual
