@@ -195,7 +195,7 @@ fn spin_axes(pts: &[DVec3], c: DVec3, axes: &[DVec3; 3], noise: f64) -> Vec<DVec
 /// on a cone about the hinge axis, and the centroid's images (which the turn does
 /// not move) fix the pivot. None when the images do not spread around a cone.
 fn cone_hinge(rel: &[DMat4], a: DVec3, c: DVec3, reference: DVec3) -> Option<Hypothesis> {
-    let b: Vec<DVec3> = rel.iter().map(|q| DMat3::from_mat4(*q) * a).collect();
+    let b = axis_images(rel, a);
     if b.iter().all(|x| x.angle_between(a) < MIN_TURN) {
         return None;
     }
@@ -227,7 +227,7 @@ fn cone_hinge(rel: &[DMat4], a: DVec3, c: DVec3, reference: DVec3) -> Option<Hyp
 /// 0.0045–0.0085); the great circle reads only where `a` points, which the cloud
 /// does show.
 fn great_circle_hinge(rel: &[DMat4], a: DVec3, c: DVec3, reference: DVec3) -> Option<Hypothesis> {
-    let b: Vec<DVec3> = rel.iter().map(|q| DMat3::from_mat4(*q) * a).collect();
+    let b = axis_images(rel, a);
     // Two turned images at least, or one stray frame makes any set flat.
     if b.iter().filter(|x| x.angle_between(a) >= MIN_TURN).count() < 2 {
         return None;
@@ -241,6 +241,11 @@ fn great_circle_hinge(rel: &[DMat4], a: DVec3, c: DVec3, reference: DVec3) -> Op
     }
     let v = e.eigenvectors.column(idx[0]);
     hinge_about(rel, &b, DVec3::new(v[0], v[1], v[2]), a, c, reference)
+}
+
+/// The images `R a` of axis `a` under the relative motions `rel`.
+fn axis_images(rel: &[DMat4], a: DVec3) -> Vec<DVec3> {
+    rel.iter().map(|q| DMat3::from_mat4(*q) * a).collect()
 }
 
 /// The hinge about axis direction `u` that turns `a` to its images `b` (one per
@@ -542,16 +547,17 @@ impl<'a> Repair<'a> {
             // Then each frame's pose is searched again along the consensus screw, and
             // along it through the pivot the frames that follow it agree on, once per
             // parent.
-            let mut screws = vec![best];
-            screws.extend(refit_pivot(
-                motions,
-                (a, b),
-                best,
-                &switched,
-                extents[b].radius,
-            ));
+            let sweep = self.swept_under[b] != Some(a);
+            let screws: Vec<Hypothesis> = if sweep {
+                let radius = extents[b].radius;
+                std::iter::once(best)
+                    .chain(refit_pivot(motions, (a, b), best, &switched, radius))
+                    .collect()
+            } else {
+                Vec::new()
+            };
             flips.extend(switched);
-            if self.swept_under[b] != Some(a) {
+            if sweep {
                 self.swept_under[b] = Some(a);
                 flips.extend(sweep_child(
                     motions,
@@ -695,12 +701,13 @@ impl<'r> PartFrames<'r> {
                 .iter()
                 .filter_map(|&s| cone_hinge(&current, s, self.c, reference)),
         );
-        let great: Vec<Hypothesis> = self
-            .spins
-            .iter()
-            .filter_map(|&s| great_circle_hinge(&current, s, self.c, reference))
-            .collect();
-        hyps.extend_from_slice(&great);
+        // The great circles come last, so they are the tail of `scored` below.
+        let first_circle = hyps.len();
+        hyps.extend(
+            self.spins
+                .iter()
+                .filter_map(|&s| great_circle_hinge(&current, s, self.c, reference)),
+        );
         let (mut res, mut cand) = (Vec::with_capacity(self.variants.len()), Vec::new());
         let mut score = |h: Hypothesis| {
             res.clear();
@@ -719,7 +726,7 @@ impl<'r> PartFrames<'r> {
         let scored: Vec<(Hypothesis, f64)> = hyps.iter().map(|&h| (h, score(h))).collect();
         let least = |x: &&(Hypothesis, f64), y: &&(Hypothesis, f64)| x.1.total_cmp(&y.1);
         let best = scored.iter().min_by(least)?;
-        let circle = scored.iter().filter(|x| great.contains(&x.0)).min_by(least);
+        let circle = scored[first_circle..].iter().min_by(least);
         match circle {
             Some(g) if g.1 <= GREAT_CIRCLE_PREFERENCE * best.1 => Some(g.0),
             _ => Some(best.0),

@@ -188,10 +188,10 @@ pub(crate) fn sweep_child(
         // candidate must come from a better basin, not just from the polish.
         let (fit_now, now) = polish(cur, dst, buf);
         let mut swept: Vec<(f64, DMat4)> = Vec::new();
-        let mut starts = Vec::new();
-        for &g in screws {
-            starts.extend(sweep(grid, &probe, &pa, g, &states, buf));
-        }
+        let starts: Vec<DMat4> = screws
+            .iter()
+            .flat_map(|&g| sweep(grid, &probe, &pa, g, &states, buf))
+            .collect();
         for q in starts {
             let (f, mo) = polish(pa * q, dst, buf);
             // Another basin: the part's points sit further from the polished current
