@@ -826,7 +826,14 @@ pub fn fit_candidate(
     stats.last = named(lm, ls, &lb);
     if let Some(o) = search {
         if o.snap_ratio > 0.0 {
-            pose_search::snap_rigid(data, &mut params, o.points, o.snap_ratio, o.keep);
+            pose_search::snap_rigid(
+                data,
+                &mut params,
+                o.points,
+                o.snap_ratio,
+                o.keep,
+                !cfg.occlusion,
+            );
         }
     }
     Ok((params, stats))
