@@ -17,7 +17,8 @@
 //! before them do not explain (`exclusive`): a small or flat piece otherwise fits
 //! equally well on another part's surface. After the main loop, `snap_rigid` gives
 //! touching Gaussians that move as one body exactly one motion, so the merge of
-//! Step 2 joins them.
+//! Step 2 joins them; on full input not a link that carries a neighbour's joint
+//! (`carries`, which borrows Step 2's 1-DOF screw fit).
 //!
 //! Measured (bench-dev full, Fast): with Gaussians placed on the true parts
 //! (`examples/pose_search_oracle.rs`) the mean pose error of xarm7 / so101 /
