@@ -1,7 +1,7 @@
 //! The `gsart` binary end to end: `truth` + `eval` on bench-dev (the ground truth
 //! scores perfectly), `fit` + `eval` on an occluded bench-dev robot, `synth` writes a
-//! readable sequence, `articulate` re-poses a result, and bad input gives a one-line
-//! error naming the file.
+//! readable sequence, `articulate` re-poses a result, bad input gives a one-line
+//! error naming the file, and a reader closing the output pipe early is no crash.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -212,4 +212,42 @@ fn restarts_must_be_one_to_sixteen() {
             "{err}"
         );
     }
+}
+
+#[test]
+fn a_reader_that_closes_the_pipe_early_is_not_a_crash() {
+    // `gsart eval … | head -1`: the rest of the output is not wanted, and `println!`
+    // would panic on the closed pipe (exit code 101).
+    let dir = tmp("pipe");
+    let seq = dir.join("laptop");
+    let (ok, _, err) = gsart(&[
+        "synth",
+        "laptop",
+        "--out",
+        seq.to_str().unwrap(),
+        "--frames",
+        "3",
+        "--points",
+        "256",
+    ]);
+    assert!(ok, "{err}");
+    let result = dir.join("r.json");
+    let (ok, _, err) = gsart(&[
+        "truth",
+        seq.to_str().unwrap(),
+        "--out",
+        result.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gsart"))
+        .args(["eval", result.to_str().unwrap(), seq.to_str().unwrap()])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run gsart");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("wait for gsart");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{:?}: {err}", out.status);
+    assert!(!err.contains("panicked"), "{err}");
 }

@@ -479,8 +479,20 @@ mod cli {
         })?;
         let gt = read_gt(&gt_file)?;
         let m = pipeline::evaluate(&result, &seq, &gt)?;
-        println!("{}", serde_json::to_string_pretty(&m).unwrap_or_default());
-        Ok(())
+        print_out(&serde_json::to_string_pretty(&m).unwrap_or_default())
+    }
+
+    /// Writes a line to standard output. A reader that closed the pipe early
+    /// (`gsart eval … | head`) is no error: the rest is simply not wanted (`println!`
+    /// would panic there).
+    fn print_out(text: &str) -> Result<()> {
+        use std::io::Write;
+        match writeln!(std::io::stdout().lock(), "{text}") {
+            Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+                Err(Error::io("standard output", e))
+            }
+            _ => Ok(()),
+        }
     }
 
     fn truth(seq_dir: &Path, out: &Path, canonical: usize) -> Result<()> {
@@ -578,7 +590,7 @@ mod cli {
         json: Option<&Path>,
     ) -> Result<()> {
         let report = gsart::bench::run(workloads, seqs, opts)?;
-        println!("{}", report.table());
+        print_out(&report.table())?;
         if let Some(p) = json {
             write_text(
                 p,
@@ -603,7 +615,7 @@ mod cli {
             let r = gsart::bench::step1_native(w, m, iters, seed)?;
             let line = serde_json::to_string(&r)
                 .map_err(|e| Error::InvalidArgument(format!("internal: {e}")))?;
-            println!("{line}");
+            print_out(&line)?;
         }
         Ok(())
     }
