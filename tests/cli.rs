@@ -98,9 +98,9 @@ fn occluded_robot_fit_recovers_most_of_the_tree() {
     assert!(reanim <= 12.0, "re-animation error {reanim}: {m}");
 }
 
-#[test]
-fn synth_then_articulate() {
-    let dir = tmp("synth");
+/// `gsart synth laptop` (3 frames of 256 points) into `dir/laptop`, then `gsart truth`
+/// of it into `dir/r.json`; returns both paths.
+fn laptop_truth(dir: &Path) -> (PathBuf, PathBuf) {
     let seq = dir.join("laptop");
     let (ok, _, err) = gsart(&[
         "synth",
@@ -122,6 +122,13 @@ fn synth_then_articulate() {
         result.to_str().unwrap(),
     ]);
     assert!(ok, "{err}");
+    (seq, result)
+}
+
+#[test]
+fn synth_then_articulate() {
+    let dir = tmp("synth");
+    let (_, result) = laptop_truth(&dir);
     let posed = dir.join("posed.ply");
     let run = |q: &str| {
         let (ok, _, err) = gsart(&[
@@ -219,26 +226,7 @@ fn a_reader_that_closes_the_pipe_early_is_not_a_crash() {
     // `gsart eval … | head -1`: the rest of the output is not wanted, and `println!`
     // would panic on the closed pipe (exit code 101).
     let dir = tmp("pipe");
-    let seq = dir.join("laptop");
-    let (ok, _, err) = gsart(&[
-        "synth",
-        "laptop",
-        "--out",
-        seq.to_str().unwrap(),
-        "--frames",
-        "3",
-        "--points",
-        "256",
-    ]);
-    assert!(ok, "{err}");
-    let result = dir.join("r.json");
-    let (ok, _, err) = gsart(&[
-        "truth",
-        seq.to_str().unwrap(),
-        "--out",
-        result.to_str().unwrap(),
-    ]);
-    assert!(ok, "{err}");
+    let (seq, result) = laptop_truth(&dir);
     let mut child = Command::new(env!("CARGO_BIN_EXE_gsart"))
         .args(["eval", result.to_str().unwrap(), seq.to_str().unwrap()])
         .stdout(std::process::Stdio::piped())
