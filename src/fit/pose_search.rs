@@ -32,8 +32,8 @@ use glam::{DMat3, DMat4, DQuat, DVec3, Vec3};
 use crate::geom::cap_mask::CapMask;
 use crate::geom::knn::point_spacing;
 use crate::geom::knn::Grid;
-use crate::geom::se3::{rigid, rigid_inverse};
-use crate::kinematics::screw::{fit_prismatic, fit_revolute};
+use crate::geom::se3::rigid;
+use crate::kinematics::screw::{fit_prismatic, fit_revolute, relative_motions};
 use crate::Result;
 
 use super::fitter::Data;
@@ -957,24 +957,20 @@ fn carries(
         return false;
     }
     let m = cluster.len();
-    let inv = |p: usize| -> Vec<DMat4> {
-        (0..kk)
-            .map(|t| rigid_inverse(&rigid(rel[p][t].0, rel[p][t].1)))
-            .collect()
-    };
-    let (inv_a, inv_b) = (inv(ca), inv(cb));
+    // The motions as poses (frame 0 at rest), for Step 2's relative motions.
+    let poses: Vec<Vec<DMat4>> = (0..kk)
+        .map(|t| rel.iter().map(|r| rigid(r[t].0, r[t].1)).collect())
+        .collect();
     (0..m)
         .filter(|&c| cluster[c] != ca && cluster[c] != cb && groups[c].len() >= 3)
         .filter(|&c| (0..m).any(|j| cluster[j] == ca && con.w[j][c] > 0))
         .any(|c| {
             let centre = groups[c].iter().copied().sum::<DVec3>() / groups[c].len() as f64;
-            let one_dof = |inv_p: &[DMat4]| {
-                let q: Vec<DMat4> = (0..kk)
-                    .map(|t| inv_p[t] * rigid(rel[c][t].0, rel[c][t].1))
-                    .collect();
+            let one_dof = |p: usize| {
+                let q = relative_motions(&poses, p, c, 0);
                 fit_revolute(&q, centre).3.min(fit_prismatic(&q).2)
             };
-            one_dof(&inv_a) < CARRY_RATIO * one_dof(&inv_b)
+            one_dof(ca) < CARRY_RATIO * one_dof(cb)
         })
 }
 
