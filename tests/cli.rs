@@ -67,18 +67,15 @@ fn ground_truth_as_result_scores_perfectly_on_bench_dev() {
     }
 }
 
-/// Occluded input gets its own pose search (`fit::occluded_search`). Measured on
-/// occluded so101 (fast, seeds 0 / 1): tree edit distance 3 / 3 and re-animation
-/// error 8.6 / 5.4 with it, 9 / 10 and 16.4 / 17.2 without any search (the
-/// behaviour before).
-#[test]
-fn occluded_robot_fit_recovers_most_of_the_tree() {
+/// `gsart fit` (fast) of bench-dev's `occluded/NAME_00` into a scratch folder, then
+/// `gsart eval` of it; None when bench-dev is not present.
+fn fit_and_eval_occluded(name: &str) -> Option<serde_json::Value> {
     let Some(root) = bench_dev() else {
         eprintln!("skip: bench-dev not present");
-        return;
+        return None;
     };
-    let seq = root.join("occluded/so101_00");
-    let out = tmp("occluded").join("fit.json");
+    let seq = root.join(format!("occluded/{name}_00"));
+    let out = tmp(&format!("occluded_{name}")).join("fit.json");
     let (ok, _, err) = gsart(&[
         "fit",
         seq.to_str().unwrap(),
@@ -91,7 +88,18 @@ fn occluded_robot_fit_recovers_most_of_the_tree() {
     assert!(ok, "{err}");
     let (ok, stdout, err) = gsart(&["eval", out.to_str().unwrap(), seq.to_str().unwrap()]);
     assert!(ok, "{err}");
-    let m: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    Some(serde_json::from_str(&stdout).unwrap())
+}
+
+/// Occluded input gets its own pose search (`fit::occluded_search`). Measured on
+/// occluded so101 (fast, seeds 0 / 1): tree edit distance 3 / 3 and re-animation
+/// error 8.6 / 5.4 with it, 9 / 10 and 16.4 / 17.2 without any search (the
+/// behaviour before).
+#[test]
+fn occluded_robot_fit_recovers_most_of_the_tree() {
+    let Some(m) = fit_and_eval_occluded("so101") else {
+        return;
+    };
     let ted = m["tree_edit_distance"].as_u64().unwrap();
     let reanim = m["reanimation_error"].as_f64().unwrap();
     assert!(ted <= 5, "tree edit distance {ted}: {m}");
@@ -104,25 +112,9 @@ fn occluded_robot_fit_recovers_most_of_the_tree() {
 /// refined, 3.01 without.
 #[test]
 fn occluded_gripper_keeps_its_hand_where_it_was_seen() {
-    let Some(root) = bench_dev() else {
-        eprintln!("skip: bench-dev not present");
+    let Some(m) = fit_and_eval_occluded("panda_gripper") else {
         return;
     };
-    let seq = root.join("occluded/panda_gripper_00");
-    let out = tmp("occluded_gripper").join("fit.json");
-    let (ok, _, err) = gsart(&[
-        "fit",
-        seq.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--quality",
-        "fast",
-        "--quiet",
-    ]);
-    assert!(ok, "{err}");
-    let (ok, stdout, err) = gsart(&["eval", out.to_str().unwrap(), seq.to_str().unwrap()]);
-    assert!(ok, "{err}");
-    let m: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     let recon = m["reconstruction_error"].as_f64().unwrap();
     assert!(recon <= 5.0, "reconstruction error {recon}: {m}");
 }
