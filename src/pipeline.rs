@@ -232,15 +232,10 @@ pub fn finish(
         // Nor the symmetry repair: a half-turned part's fit to a one-sided cloud says
         // little (seed 0, fast: recon 14.86 → 15.92, TED 5.0 → 5.6 with it).
         kin_opts.flips = false;
-        // Nor the root's motion in the refinement: its loss compares frame c's view
-        // with frame t's, and moving the whole object is the cheapest way to make two
-        // views of different sides overlap. Kept at the projection's (the root's
-        // Step-1 motion), bench-dev occluded, the seven robots, recon / flow, fast
-        // seed 0: 12.61 → 10.62 / 14.31 → 10.81; balanced seed 0: 13.44 → 10.08 /
-        // 16.38 → 11.47.
-        if let Some(refine) = kin_opts.refine.as_mut() {
-            refine.root = false;
-        }
+        // Nor the still root's motion (see `KinOptions::keep_still_root`): bench-dev
+        // occluded, the seven robots, recon / flow, fast seed 0: 12.61 → 10.62 / 14.31
+        // → 10.81; balanced seed 0: 13.44 → 10.08 / 16.38 → 11.47.
+        kin_opts.keep_still_root = true;
     }
     let (mut result, kin) = crate::kinematics::build_articulated(
         &points,

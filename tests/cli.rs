@@ -106,7 +106,7 @@ fn occluded_robot_fit_recovers_most_of_the_tree() {
     assert!(reanim <= 12.0, "re-animation error {reanim}: {m}");
 }
 
-/// On occluded input the refinement keeps the root's Step-1 motion: refined, the root
+/// On occluded input the refinement leaves a still root where it is: refined, the root
 /// moved the whole object to make frame c's view overlap each frame's view of another
 /// side. Occluded panda_gripper (fast, seed 0): reconstruction error 7.86 with the root
 /// refined, 3.01 without.
