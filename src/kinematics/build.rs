@@ -360,14 +360,14 @@ pub fn build_articulated(
             .collect();
         let parts = merged.parts;
         let dist = pair_distances(points, &new_labels, parts, canonical);
+        let mut sizes = vec![0usize; parts];
+        for &l in &new_labels[canonical] {
+            sizes[l as usize] += 1;
+        }
         // Extents, pair costs, root and tree from the parts' motions.
         let tree_of = |motions: &[Vec<DMat4>]| {
             let extents = part_extents(points, &new_labels, motions, canonical);
             let costs = pair_costs(motions, &dist, canonical, &extents);
-            let mut sizes = vec![0usize; parts];
-            for &l in &new_labels[canonical] {
-                sizes[l as usize] += 1;
-            }
             let root = least_motion_root(motions, &sizes);
             let parent = spanning_tree(&costs, root);
             (extents, costs, root, parent)

@@ -88,13 +88,10 @@ pub fn least_motion_root(poses: &[Vec<DMat4>], sizes: &[usize]) -> usize {
     let motion: Vec<f64> = (0..sizes.len()).map(|p| part_motion(poses, p)).collect();
     let least = motion.iter().copied().fold(f64::INFINITY, f64::min);
     let tie = least * (1.0 + 1e-9) + 1e-15;
-    let mut best = 0;
-    for p in 0..sizes.len() {
-        if motion[p] <= tie && (motion[best] > tie || sizes[p] > sizes[best]) {
-            best = p;
-        }
-    }
-    best
+    (0..sizes.len())
+        .filter(|&p| motion[p] <= tie)
+        .max_by_key(|&p| (sizes[p], std::cmp::Reverse(p)))
+        .unwrap_or(0)
 }
 
 /// Minimum spanning tree of the pair costs, directed away from `root`.
