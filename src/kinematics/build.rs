@@ -584,15 +584,24 @@ mod tests {
         (points, vec![lab; k], poses)
     }
 
+    /// `build_articulated` with no clock and no progress.
+    fn build(
+        points: &[Vec<Vec3>],
+        labels: &[Vec<u32>],
+        poses: &[Vec<DMat4>],
+        canonical: usize,
+        opts: &KinOptions,
+    ) -> crate::Result<(FitResult, KinReport)> {
+        build_articulated(points, labels, poses, canonical, opts, &|| 0.0, &mut |_| {
+            Control::Continue
+        })
+    }
+
     #[test]
     fn two_part_scene_and_cancellation() {
         let (points, labels, poses) = scene();
         let opts = KinOptions::default();
-        let (res, rep) =
-            build_articulated(&points, &labels, &poses, 1, &opts, &|| 0.0, &mut |_| {
-                Control::Continue
-            })
-            .unwrap();
+        let (res, rep) = build(&points, &labels, &poses, 1, &opts).unwrap();
         assert_eq!(rep.parts, 2);
         assert_eq!(rep.parent, vec![-1, 0]);
         let j = &res.joints.as_ref().unwrap()[0];
@@ -642,11 +651,7 @@ mod tests {
     fn a_still_root_stays_still_through_the_refinement() {
         let (points, labels, poses) = one_sided(scene());
         let opts = occluded_opts();
-        let (res, rep) =
-            build_articulated(&points, &labels, &poses, 0, &opts, &|| 0.0, &mut |_| {
-                Control::Continue
-            })
-            .unwrap();
+        let (res, rep) = build(&points, &labels, &poses, 0, &opts).unwrap();
         // the joint was refined, the root not moved
         assert!(
             rep.refine.as_ref().is_some_and(|r| r.accepted),
@@ -680,11 +685,7 @@ mod tests {
             f.iter_mut().for_each(|p| *p = slide(t) * *p);
         }
         let opts = occluded_opts();
-        let (res, rep) =
-            build_articulated(&points, &labels, &poses, 0, &opts, &|| 0.0, &mut |_| {
-                Control::Continue
-            })
-            .unwrap();
+        let (res, rep) = build(&points, &labels, &poses, 0, &opts).unwrap();
         assert!(rep.refine.as_ref().is_some_and(|r| r.accepted));
         // the refinement moved the root off its observed motion (towards overlapping
         // the one-sided views, as without `keep_still_root`)
@@ -700,16 +701,7 @@ mod tests {
     fn empty_part_is_absorbed_into_a_single_part_model() {
         let (points, labels, poses) = scene();
         let labels: Vec<Vec<u32>> = labels.iter().map(|l| vec![0; l.len()]).collect();
-        let (res, rep) = build_articulated(
-            &points,
-            &labels,
-            &poses,
-            0,
-            &KinOptions::default(),
-            &|| 0.0,
-            &mut |_| Control::Continue,
-        )
-        .unwrap();
+        let (res, rep) = build(&points, &labels, &poses, 0, &KinOptions::default()).unwrap();
         assert_eq!(rep.parts, 1);
         assert_eq!(res.parts, 1);
         assert!(res.joints.as_ref().unwrap().is_empty());
@@ -720,11 +712,7 @@ mod tests {
     fn bad_inputs_are_typed_errors() {
         let (points, mut labels, poses) = scene();
         let opts = KinOptions::default();
-        let go = |l: &[Vec<u32>], c: usize| {
-            build_articulated(&points, l, &poses, c, &opts, &|| 0.0, &mut |_| {
-                Control::Continue
-            })
-        };
+        let go = |l: &[Vec<u32>], c: usize| build(&points, l, &poses, c, &opts);
         assert!(matches!(
             go(&labels, 9),
             Err(crate::Error::InvalidArgument(_))
