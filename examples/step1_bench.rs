@@ -86,6 +86,7 @@ fn main() {
                 }
             }
             "--seed" => opts.seed = val().parse().expect("seed"),
+            "--no-mle" => weights.mle = 0.0,
             "--no-emd" => weights.emd = 0.0,
             "--no-cd" => weights.cd = 0.0,
             "--no-sep" => weights.sep = 0.0,

@@ -31,7 +31,7 @@
 //! (`still_root`). After its turns, each child's pose in every frame is searched
 //! again along the consensus screw, and about its axis through the pivot the frames
 //! that follow it agree on (`refit_pivot`, `joint_sweep`). Measured effects and the variants
-//! tried are in the README ("Half-turn repair", "Joint sweep").
+//! tried are in docs/DEVELOPMENT.md ("Half-turn repair", "Joint sweep").
 
 use glam::{DMat3, DMat4, DVec3, Vec3};
 use nalgebra::{Matrix3, SymmetricEigen};

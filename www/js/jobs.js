@@ -74,7 +74,7 @@ function copies(frames) {
 }
 
 // One worker per core: the main thread only draws and relays progress, so it does not
-// need a core of its own (finger_edu fast on 2 cores: one worker 44.4 s, two: see README).
+// need a core of its own (finger_edu fast on 2 cores: one worker 44.4 s, two: see docs/DEVELOPMENT.md).
 export function maxParallel() {
   const hc = navigator.hardwareConcurrency || 2;
   return Math.max(1, Math.min(hc, 8));
