@@ -204,11 +204,24 @@ impl PrepareCache {
 }
 
 /// The global pose search (`fit::pose_search`) runs only when every working frame
-/// has at least this many points: on sparse frames its groups are too small to be
-/// told apart. Measured (Fast, end to end): procedural laptop 4 × 512 mean RI 0.505 /
-/// reconstruction 9.56 with the search vs 0.725 / 1.42 without; 10 × 2048: 0.97 /
-/// 1.43 with vs 0.84 / 1.70 without.
-pub const SEARCH_MIN_POINTS: usize = 1024;
+/// has at least this many points: on sparser frames it has not been shown to help.
+/// Measured end to end, generator seeds 0–3, mean RI / reconstruction / TED /
+/// re-animation without → with the search (session 22):
+/// - laptop 4 × 512 (SPEC §7's "object" workload): balanced 0.658 / 4.92 / 4.00 /
+///   4.90 → 0.944 / 1.77 / 0.00 / 0.69; fast 0.798 / 3.21 / 2.25 / 4.67 → 0.935 /
+///   1.83 / 0.00 / 0.84;
+/// - cabinet 4 × 512: balanced 0.575 / 8.13 / 4.00 / 9.69 → 0.564 / 5.42 / 1.25 /
+///   5.98; fast 0.593 / 7.50 / 2.75 / 7.04 → 0.546 / 4.90 / 2.25 / 5.17;
+/// - arm, quadruped and hand 4 × 512 (seeds 0–1; 7–13 parts, more than the range
+///   3–7 of such sparse input can hold): balanced 0.779 / 2.80 / 4.50 / 4.44 →
+///   0.756 / 2.72 / 6.17 / 5.94.
+///
+/// At 4 × 256 it helps the laptop too (fast: RI 0.626 → 0.872, TED 5.0 → 0.5) but
+/// costs the cabinet RI (0.580 → 0.477), so the bound stays at 512. In session 3, before
+/// the flip guard and the sparse distance cap, the search had cost the 4 × 512 laptop
+/// (RI 0.725 → 0.505), and the bound was 1024. Denser frames always had it: 10 × 2048
+/// laptop 0.97 / 1.43 with vs 0.84 / 1.70 without (fast).
+pub const SEARCH_MIN_POINTS: usize = 512;
 
 /// The same bound for occluded input, whose frames show about half the points: the
 /// occluded search (`fit::occluded_search`) is measured on bench-dev's occluded
