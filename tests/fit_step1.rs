@@ -116,6 +116,45 @@ fn deterministic_for_a_seed() {
     assert_ne!(c.model, e.model);
 }
 
+/// Progress names only the losses an iteration computed: the Chamfer until EMD replaces
+/// it, then the EMD (the page plots whichever is there; a term that was not computed
+/// used to be reported as 0, and the live loss curve dropped to 0 at the switch).
+#[test]
+fn progress_reports_the_transfer_term_in_use() {
+    let seq = two_boxes(3, 150, 4);
+    let mut o = opts();
+    o.iters = Some(160);
+    let seen = std::cell::RefCell::new(Vec::new());
+    fit_step1_single(&seq, 2, &o, &mut |p| {
+        if p.stage == gsart::pipeline::Stage::Gaussians {
+            let names: Vec<String> = p.losses.iter().map(|(k, _)| k.clone()).collect();
+            seen.borrow_mut().push((p.iter, names));
+        }
+        Control::Continue
+    })
+    .unwrap();
+    let seen = seen.into_inner();
+    let has = |names: &[String], n: &str| names.iter().any(|k| k == n);
+    let (mut cd, mut emd) = (0, 0);
+    for (it, names) in &seen {
+        assert!(
+            has(names, "mle") && has(names, "sep"),
+            "iteration {it}: {names:?}"
+        );
+        assert!(
+            has(names, "chamfer") != has(names, "emd"),
+            "iteration {it}: one transfer term, not {names:?}"
+        );
+        assert!(!has(names, "split"), "full input has no split-half term");
+        cd += usize::from(has(names, "chamfer"));
+        emd += usize::from(has(names, "emd"));
+    }
+    assert!(cd > 0 && emd > 0, "both phases reported: {seen:?}");
+    // Chamfer first, then EMD.
+    let first_emd = seen.iter().position(|(_, n)| has(n, "emd")).unwrap();
+    assert!(seen[first_emd..].iter().all(|(_, n)| has(n, "emd")));
+}
+
 #[test]
 fn cancel_stops_promptly() {
     let seq = two_boxes(3, 150, 3);

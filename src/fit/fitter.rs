@@ -710,6 +710,7 @@ pub fn fit_candidate(
     };
     let mut lb = LossesB::default();
     let (mut lm, mut ls) = (0.0, 0.0);
+    let mut terms = Terms::default();
     for it in 0..sched.iters {
         if let (Some(o), false) = (&cfg.pose_init, cfg.occlusion) {
             if o.refine_every > 0 && it > 0 && it % o.refine_every == 0 {
@@ -798,6 +799,12 @@ pub fn fit_candidate(
         }
         acc.zero();
         lb = loss_b(data, &plan, cfg, ff, &mut ws, Some(&mut acc));
+        terms = Terms {
+            cd: plan.use_cd,
+            emd: use_emd,
+            flow: plan.flow,
+            split: plan.split.is_some(),
+        };
         acc.to_flat(&params, &mut flat);
         adam.step(&mut params.x, &flat);
         // Return the EMD correspondences to the cache.
@@ -816,14 +823,14 @@ pub fn fit_candidate(
                 Stage::Gaussians,
                 it,
                 sched.iters,
-                named(lm, ls, &lb),
+                named(lm, ls, &lb, terms),
                 &params,
                 snap,
                 cb,
             )?;
         }
     }
-    stats.last = named(lm, ls, &lb);
+    stats.last = named(lm, ls, &lb, terms);
     if let Some(o) = search {
         if o.snap_ratio > 0.0 {
             pose_search::snap_rigid(
@@ -839,15 +846,33 @@ pub fn fit_candidate(
     Ok((params, stats))
 }
 
-fn named(lm: f64, ls: f64, lb: &LossesB) -> Vec<(String, f64)> {
-    vec![
-        ("mle".into(), lm),
-        ("sep".into(), ls),
-        ("chamfer".into(), lb.cd),
-        ("emd".into(), lb.emd),
-        ("flow".into(), lb.flow),
-        ("split".into(), lb.split),
-    ]
+/// Which transfer-step terms an iteration used.
+#[derive(Debug, Clone, Copy, Default)]
+struct Terms {
+    cd: bool,
+    emd: bool,
+    flow: bool,
+    split: bool,
+}
+
+/// The losses of an iteration, by name, for progress reports: L_MLE and L_sep, then only
+/// the transfer-step terms it used (Chamfer *or* EMD, after the switch), so that a
+/// term that was not computed is not shown as 0 (the page plots the Chamfer, then the
+/// EMD).
+fn named(lm: f64, ls: f64, lb: &LossesB, terms: Terms) -> Vec<(String, f64)> {
+    let mut out = vec![("mle".into(), lm), ("sep".into(), ls)];
+    let used = [
+        ("chamfer", lb.cd, terms.cd),
+        ("emd", lb.emd, terms.emd),
+        ("flow", lb.flow, terms.flow),
+        ("split", lb.split, terms.split),
+    ];
+    out.extend(
+        used.iter()
+            .filter(|t| t.2)
+            .map(|&(name, v, _)| (name.to_string(), v)),
+    );
+    out
 }
 
 #[allow(clippy::too_many_arguments)]

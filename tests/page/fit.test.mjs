@@ -33,6 +33,16 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   await page.getByLabel('Maximum part count').fill('4');
   // Two fits per part count (restarts), the better one counting.
   await page.getByLabel('Fits per part count').selectOption('2');
+  // Record what the live loss chart is given.
+  await page.evaluate(() => {
+    const c = window.gsart.state.chart;
+    const add = c.add.bind(c);
+    window.plotted = [];
+    c.add = (key, label, x, y) => {
+      if (Number.isFinite(y)) window.plotted.push([key, y]);
+      add(key, label, x, y);
+    };
+  });
   await page.locator('#btn-fit').click();
   // The view as the fit starts, to compare with views taken while Step 1 runs.
   let a = await canvasPng(page);
@@ -64,6 +74,14 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   assert.ok(moving > 0, `the view updates during the fit (${views} views taken while Step 1 ran)`);
   await page.waitForTimeout(400);
   await shot(page, 'fit-done');
+  // The loss chart got Step 1's transfer loss per candidate and Step 3's refinement
+  // loss, all positive: the warm-up's (negative) L_MLE and terms a step did not compute
+  // (once reported as 0) are not plotted.
+  const plotted = await page.evaluate(() => window.plotted);
+  const keys = new Set(plotted.map(([k]) => k));
+  assert.ok(keys.has('m2') && keys.has('m4') && keys.has('joints'), `chart series: ${[...keys]}`);
+  const bad = plotted.filter(([, y]) => !(y > 0));
+  assert.equal(bad.length, 0, `non-positive losses plotted: ${JSON.stringify(bad.slice(0, 5))}`);
 
   // Results: tree diagram, joints with sliders, metrics (the example has ground truth).
   const nodes = await page.locator('#tree .node').count();

@@ -516,16 +516,17 @@ function fitUi(running) {
   for (const el of document.querySelectorAll('#step-load button, #step-load input, .chip')) el.disabled = running;
 }
 
+// The loss the chart plots: Step 1's transfer loss (the Chamfer until EMD replaces it,
+// then the EMD) and Step 3's refinement loss. Reports without one (the warm-up's L_MLE,
+// which is negative, and L_sep) are not plotted.
 function lossValue(losses) {
   if (!losses) return NaN;
   const entries = Array.isArray(losses) ? losses : Object.entries(losses);
-  if (!entries.length) return NaN;
-  const pref = ['total', 'chamfer', 'cd', 'loss'];
-  for (const p of pref) {
+  for (const p of ['chamfer', 'emd', 'refine']) {
     const e = entries.find(([k]) => k.toLowerCase() === p);
     if (e) return e[1];
   }
-  return entries.reduce((s, [, v]) => s + (Number.isFinite(v) ? v : 0), 0);
+  return NaN;
 }
 
 async function startFit() {
