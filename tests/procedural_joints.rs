@@ -16,16 +16,24 @@ use gsart::synth::{generate, ObjectKind, SynthOptions};
 /// Generates `kind` with generator seed `seed`, fits it (fast preset, default part
 /// range) and evaluates it: the result's part count and the metrics.
 fn fit_and_evaluate(kind: ObjectKind, seed: u64) -> (usize, Metrics) {
-    let out = generate(&SynthOptions {
-        seed,
-        ..SynthOptions::new(kind)
-    })
-    .expect("generate");
     let opts = FitOptions {
         quality: Quality::Fast,
         ..Default::default()
     };
-    let fitted = fit(&out.sequence, &opts, &|_| Control::Continue).expect("fit");
+    generate_fit_evaluate(
+        &SynthOptions {
+            seed,
+            ..SynthOptions::new(kind)
+        },
+        &opts,
+    )
+}
+
+/// Generates `so`, fits it with `opts` and evaluates it: the result's part count and
+/// the metrics.
+fn generate_fit_evaluate(so: &SynthOptions, opts: &FitOptions) -> (usize, Metrics) {
+    let out = generate(so).expect("generate");
+    let fitted = fit(&out.sequence, opts, &|_| Control::Continue).expect("fit");
     let m = evaluate(&fitted.result, &out.sequence, &out.gt).expect("evaluate");
     (fitted.result.parts, m)
 }
@@ -70,18 +78,13 @@ fn laptop_tree_and_hinge_are_exact_for_every_seed() {
 fn sparse_laptop_with_the_default_preset() {
     let mut failures = Vec::new();
     for seed in 0..4 {
-        let out = generate(&SynthOptions {
+        let so = SynthOptions {
             seed,
             frames: 4,
             points: 512,
             ..SynthOptions::new(ObjectKind::Laptop)
-        })
-        .expect("generate");
-        let fitted = fit(&out.sequence, &FitOptions::default(), &|_| {
-            Control::Continue
-        })
-        .expect("fit");
-        let m = evaluate(&fitted.result, &out.sequence, &out.gt).expect("evaluate");
+        };
+        let (_, m) = generate_fit_evaluate(&so, &FitOptions::default());
         let j = m.joints.as_ref().expect("joint errors");
         eprintln!(
             "sparse laptop seed {seed}: RI {:.3} TED {:?} types {}/{}",

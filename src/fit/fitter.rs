@@ -868,9 +868,9 @@ fn named(lm: f64, ls: f64, lb: &LossesB, terms: Terms) -> Vec<(String, f64)> {
         ("split", lb.split, terms.split),
     ];
     out.extend(
-        used.iter()
-            .filter(|t| t.2)
-            .map(|&(name, v, _)| (name.to_string(), v)),
+        used.into_iter()
+            .filter(|&(_, _, on)| on)
+            .map(|(name, v, _)| (name.to_string(), v)),
     );
     out
 }
