@@ -163,7 +163,7 @@ fn icp(tpl: &Template, ys: &[DVec3], mut mo: Motion, rounds: usize) -> Motion {
         b.clear();
         for y in ys {
             let x = ri * *y + ci;
-            if let Some((j, d2)) = tpl.grid.nearest(x.as_vec3()) {
+            if let Some((j, d2)) = tpl.grid.nearest_capped(x.as_vec3(), (4.0 * R2) as f32) {
                 if (d2 as f64) < 4.0 * R2 {
                     a.push(tpl.pts[j as usize]);
                     b.push(*y);

@@ -170,6 +170,22 @@ impl Grid {
         Some(best)
     }
 
+    /// Nearest indexed point to `q` closer than `cap2` (squared), if any: (original
+    /// index, squared distance). Like `nearest_d2_capped`, a query far from the
+    /// cloud costs a few cell visits; `nearest` would grow shells until it finds one.
+    pub fn nearest_capped(&self, q: Vec3, cap2: f32) -> Option<(u32, f32)> {
+        if self.pts.is_empty() {
+            return None;
+        }
+        let qc = q.clamp(self.min, self.max);
+        if q.distance_squared(qc) >= cap2 {
+            return None;
+        }
+        let mut best = (u32::MAX, cap2);
+        self.search(q, &mut best);
+        (best.0 != u32::MAX).then_some(best)
+    }
+
     /// Squared distance from `q` to its nearest indexed point, capped at `cap2`:
     /// the search stops at that radius, so queries far from the cloud (most
     /// candidate poses of a global search) cost a few cell visits instead of a scan.
@@ -370,6 +386,9 @@ mod tests {
             let cap = 0.01;
             let want = brute(&pts, q).min(cap);
             assert_eq!(g.nearest_d2_capped(q, cap), want, "{q:?}");
+            // The capped nearest point: the uncapped one when it is within the cap.
+            let near = g.nearest(q).filter(|&(_, d)| d < cap);
+            assert_eq!(g.nearest_capped(q, cap), near, "{q:?}");
         }
     }
 
