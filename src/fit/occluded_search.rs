@@ -22,7 +22,7 @@
 //! rounds and polish after it; mean of seeds 0 and 1) against no search, which was
 //! the behaviour before: tree edit distance 10.1 → 5.4, re-animation error 11.8 → 8.3,
 //! reconstruction error 16.4 → 14.8, flow error 18.4 → 17.7, mean RI 0.744 → 0.720;
-//! about 13 s per sequence instead of 2 s then; 2.5–4.8 s since its ICP queries the
+//! about 13 s per sequence instead of 2 s then; 1.8–3.9 s since its ICP queries the
 //! template with a capped nearest search (session 23). It is far from the full-input search:
 //! with Gaussians on the true parts the mean pose error is 12.0 (10.2 with the
 //! full-input search's scoring, 0.8 on full input). The greedy order is the limit:

@@ -174,15 +174,7 @@ impl Grid {
     /// index, squared distance). Like `nearest_d2_capped`, a query far from the
     /// cloud costs a few cell visits; `nearest` would grow shells until it finds one.
     pub fn nearest_capped(&self, q: Vec3, cap2: f32) -> Option<(u32, f32)> {
-        if self.pts.is_empty() {
-            return None;
-        }
-        let qc = q.clamp(self.min, self.max);
-        if q.distance_squared(qc) >= cap2 {
-            return None;
-        }
-        let mut best = (u32::MAX, cap2);
-        self.search(q, &mut best);
+        let best = self.capped(q, cap2);
         (best.0 != u32::MAX).then_some(best)
     }
 
@@ -190,17 +182,22 @@ impl Grid {
     /// the search stops at that radius, so queries far from the cloud (most
     /// candidate poses of a global search) cost a few cell visits instead of a scan.
     pub fn nearest_d2_capped(&self, q: Vec3, cap2: f32) -> f32 {
+        self.capped(q, cap2).1
+    }
+
+    /// The nearest point within `cap2`: (index, squared distance), or (u32::MAX, cap2).
+    fn capped(&self, q: Vec3, cap2: f32) -> (u32, f32) {
+        let mut best = (u32::MAX, cap2);
         if self.pts.is_empty() {
-            return cap2;
+            return best;
         }
         // Clamping onto the box is non-expansive: |q − p| ≥ |q_c − p| for indexed p.
         let qc = q.clamp(self.min, self.max);
         if q.distance_squared(qc) >= cap2 {
-            return cap2;
+            return best;
         }
-        let mut best = (u32::MAX, cap2);
         self.search(q, &mut best);
-        best.1
+        best
     }
 
     /// Improves `best` (start: nothing closer than `best.1`) to the nearest point.
