@@ -91,18 +91,14 @@ impl Template {
         self.grid.rebuild(&p32);
     }
 
+    /// Squared distance to the nearest template point, capped at `R2`. A miss comes
+    /// back as exactly `R2` (not the grid's f32 cap, which f32 rounds down for some
+    /// radii), so "nothing within the radius" never counts as inside it.
     #[inline]
-    /// Squared distance to the nearest template point, capped at `R2`. The grid caps
-    /// in f32; a capped distance comes back as exactly `R2`, so that "nothing within
-    /// the radius" never counts as inside it (f32 rounds some radii down).
     fn d2(&self, x: DVec3) -> f64 {
-        let cap = R2 as f32;
-        let d = self.grid.nearest_d2_capped(x.as_vec3(), cap);
-        if d >= cap {
-            R2
-        } else {
-            d as f64
-        }
+        self.grid
+            .nearest_capped(x.as_vec3(), R2 as f32)
+            .map_or(R2, |(_, d)| d as f64)
     }
 }
 
