@@ -338,14 +338,13 @@ pub fn finish(
             c.x, c.y, c.z, norm.scale
         ));
     }
-    notes.push(format!(
-        "occlusion handling: {}",
-        if step1.occlusion_used {
-            "on (partial/occluded losses)"
-        } else {
-            "off (full-surface losses)"
-        }
-    ));
+    let sizes = seq.frames.iter().map(|f| f.points.len());
+    let (fewest, most) = (sizes.clone().min().unwrap_or(0), sizes.max().unwrap_or(0));
+    notes.push(if step1.occlusion_used {
+        format!("occlusion handling: on (partial/occluded losses; input frames of {fewest}–{most} points)")
+    } else {
+        "occlusion handling: off (full-surface losses)".to_string()
+    });
     let fits = if step1.restarts > 1 {
         format!(", best of {} fits each", step1.restarts)
     } else {

@@ -82,10 +82,12 @@ pub fn working_clouds(
 
 /// Occlusion detection for `Occlusion::Auto`: whole-surface samples of one object
 /// have (nearly) equal point counts per frame, single-view visible subsets do not.
-/// Returns true when the smallest working frame has < 85 % of the largest's points.
-pub fn detect_occlusion(clouds: &[Vec<Vec3>]) -> bool {
-    let max = clouds.iter().map(|c| c.len()).max().unwrap_or(0);
-    let min = clouds.iter().map(|c| c.len()).min().unwrap_or(0);
+/// Returns true when the smallest frame has < 85 % of the largest's points. Judged
+/// on the input frames' sizes, not the working clouds': downsampling to the working
+/// size gives dense single-view scans (every frame above it) equal counts.
+pub fn detect_occlusion(sizes: &[usize]) -> bool {
+    let max = sizes.iter().copied().max().unwrap_or(0);
+    let min = sizes.iter().copied().min().unwrap_or(0);
     max > 0 && (min as f64) < 0.85 * max as f64
 }
 
@@ -137,7 +139,10 @@ pub fn prepare(seq: &Sequence, opts: &FitOptions) -> Result<Prepared> {
     let occluded = match opts.occlusion {
         Occlusion::On => true,
         Occlusion::Off => false,
-        Occlusion::Auto => detect_occlusion(&clouds),
+        Occlusion::Auto => {
+            let sizes: Vec<usize> = seq.frames.iter().map(|f| f.points.len()).collect();
+            detect_occlusion(&sizes)
+        }
     };
     let mut sched = Schedule::preset(opts.quality, is_small(seq, opts.working_size));
     if let Some(it) = opts.iters {
@@ -610,6 +615,46 @@ mod size_rule_tests {
             &c,
             &cache.get(&mk(1e-3), &seeded).unwrap()
         ));
+    }
+
+    #[test]
+    fn dense_single_view_frames_are_detected_as_occluded_before_downsampling() {
+        // Frames of 900, 600 and 750 points (one camera each would see that much
+        // more or less), all above a working size of 256: the working clouds have
+        // equal counts, the input frames do not.
+        let frames = |sizes: &[usize]| Sequence {
+            frames: sizes
+                .iter()
+                .enumerate()
+                .map(|(k, &n)| Frame {
+                    name: format!("{k}.ply"),
+                    points: (0..n)
+                        .map(|i| {
+                            let a = i as f32 * 2.399_963;
+                            let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+                            let r = (1.0 - z * z).max(0.0).sqrt();
+                            glam::Vec3::new(r * a.cos(), r * a.sin(), z)
+                        })
+                        .collect(),
+                    ..Default::default()
+                })
+                .collect(),
+        };
+        let opts = FitOptions {
+            working_size: 256,
+            ..FitOptions::default()
+        };
+        let varied = prepare(&frames(&[900, 600, 750]), &opts).unwrap();
+        assert!(varied.data.frames.iter().all(|f| f.len() == 256));
+        assert!(varied.occluded);
+        assert!(!prepare(&frames(&[900, 880, 900]), &opts).unwrap().occluded);
+        // Below the working size the counts speak for themselves, as before.
+        assert!(prepare(&frames(&[200, 120, 180]), &opts).unwrap().occluded);
+        let off = FitOptions {
+            occlusion: Occlusion::Off,
+            ..opts
+        };
+        assert!(!prepare(&frames(&[900, 600, 750]), &off).unwrap().occluded);
     }
 
     #[test]
