@@ -6,4 +6,5 @@ pub mod camera;
 pub mod cap_mask;
 pub mod fps;
 pub mod knn;
+pub mod layers;
 pub mod se3;
