@@ -4,7 +4,6 @@
 //!
 //! Usage: `cargo run --release --example layers -- SEQ_DIR... [--max N]`
 
-use glam::DVec3;
 use gsart::geom::layers::layered_fraction;
 
 fn main() {
@@ -33,12 +32,7 @@ fn main() {
             .iter()
             .filter_map(|fr| {
                 let step = fr.points.len().div_ceil(max).max(1);
-                let pts: Vec<DVec3> = fr
-                    .points
-                    .iter()
-                    .step_by(step)
-                    .map(|p| p.as_dvec3())
-                    .collect();
+                let pts: Vec<_> = fr.points.iter().step_by(step).copied().collect();
                 layered_fraction(&pts)
             })
             .collect();

@@ -899,18 +899,16 @@ pub fn snap_rigid(
                         }
                     }
                 }
-                if worst <= ratio && carry && carries(&con, &cluster, &groups, &rel, ca, cb) {
+                if worst > ratio || best.is_some_and(|b| worst >= b.0) {
                     continue;
                 }
-                if worst <= ratio
-                    && carry
-                    && members
-                        .iter()
-                        .any(|&j| straddles(&targets, &groups[j], &rel[j], &rel[cb]))
-                {
-                    continue;
-                }
-                if worst <= ratio && best.is_none_or(|b| worst < b.0) {
+                // Refusals, checked only for a pair that would be the best so far.
+                let keeps_motion = carry
+                    && (carries(&con, &cluster, &groups, &rel, ca, cb)
+                        || members
+                            .iter()
+                            .any(|&j| straddles(&targets, &groups[j], &rel[j], &rel[cb])));
+                if !keeps_motion {
                     best = Some((worst, ca, cb));
                 }
             }

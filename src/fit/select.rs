@@ -100,22 +100,22 @@ pub fn detect_occlusion(sizes: &[usize], clouds: &[Vec<Vec3>]) -> bool {
         && clouds.iter().all(|c| c.len() >= SINGLE_VIEW_MIN_POINTS)
         && clouds.iter().all(|c| {
             let step = c.len().div_ceil(SINGLE_VIEW_MIN_POINTS).max(1);
-            let pts: Vec<glam::DVec3> = c.iter().step_by(step).map(|p| p.as_dvec3()).collect();
+            let pts: Vec<Vec3> = c.iter().step_by(step).copied().collect();
             crate::geom::layers::layered_fraction(&pts).is_some_and(|f| f < SINGLE_VIEW_LAYERED)
         })
 }
 
 /// A frame is one camera's view when less than this fraction of its points is
 /// hidden behind others from its best view (`geom::layers::layered_fraction`).
-/// Measured, the largest over a sequence's frames: bench-dev occluded 0.019–0.033 and
-/// procedural occluded 0.005–0.066; bench-dev partial (each part seen from one
-/// camera, parts overlapping) 0.079–0.222; bench-dev full 0.229–0.388, procedural
-/// full (at 1024 and more points per frame) 0.265–0.499.
+/// Measured, the largest over a sequence's frames: bench-dev occluded 0.020–0.034 and
+/// procedural occluded 0.008–0.072; bench-dev partial (each part seen from one
+/// camera, parts overlapping) 0.074–0.219; bench-dev full 0.240–0.379, procedural
+/// full (at 1024 and more points per frame) 0.259–0.491.
 pub const SINGLE_VIEW_LAYERED: f64 = 0.1;
 
 /// Frames need this many points for the single-view test (and it looks at this many).
 /// Below it a thin part's two sides fall within one layer: the 4 × 512 laptop (full
-/// surface) has no frame above 0.064 on generator seed 1.
+/// surface) has no frame above 0.062 on generator seed 1.
 pub const SINGLE_VIEW_MIN_POINTS: usize = 1024;
 
 fn validate(seq: &Sequence) -> Result<()> {
@@ -690,13 +690,7 @@ mod size_rule_tests {
         // its direction), n points evenly spread over it.
         let cap = |n: usize, dir: glam::DVec3| -> Vec<glam::Vec3> {
             let d = dir.normalize();
-            let a = if d.x.abs() < 0.9 {
-                glam::DVec3::X
-            } else {
-                glam::DVec3::Y
-            };
-            let u = d.cross(a).normalize();
-            let w = d.cross(u);
+            let (u, w) = d.any_orthonormal_pair();
             (0..n)
                 .map(|i| {
                     let z = 1.0 - (2.0 / 3.0) * (i as f64 + 0.5) / n as f64;

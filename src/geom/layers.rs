@@ -5,14 +5,11 @@
 //! about half its points are behind others. [`layered_fraction`] is the fraction of
 //! points hidden behind another one, from the direction that hides the fewest.
 //!
-//! Measured (best of 600 directions and a local refinement, on at most 1024 points
-//! per frame, the median over a sequence's frames): bench-dev occluded 0.00–0.04,
-//! procedural objects occluded 0.00–0.05; bench-dev full 0.19–0.36, procedural full
-//! 0.18–0.50. Sparse thin objects look one-layered: the 4 × 512 laptop, full surface,
-//! 0.03–0.27 over four generator seeds, so the occlusion rule uses it only on frames
-//! of at least 1024 points (`fit::select::detect_occlusion`).
+//! From at most 1024 points per frame it separates bench-dev's occluded frames from
+//! its whole surfaces by a wide margin; sparse thin objects look one-layered. The
+//! measurements and the threshold are at `fit::select::SINGLE_VIEW_LAYERED`.
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 
 use super::knn::point_spacing;
 
@@ -22,13 +19,6 @@ const CELL: f64 = 2.5;
 const LAYER_GAP: f64 = 4.0;
 /// Directions tried over the sphere before the local refinement.
 const DIRECTIONS: usize = 600;
-
-/// Orthonormal `(u, w)` completing `f` to a right-handed basis.
-fn basis(f: DVec3) -> (DVec3, DVec3) {
-    let a = if f.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
-    let u = f.cross(a).normalize();
-    (u, f.cross(u))
-}
 
 /// Near-uniform points on the unit sphere.
 fn fibonacci(n: usize) -> Vec<DVec3> {
@@ -44,9 +34,9 @@ fn fibonacci(n: usize) -> Vec<DVec3> {
 }
 
 /// Reusable buffers of one cloud's views.
-struct Views<'a> {
-    points: &'a [DVec3],
-    centre: DVec3,
+struct Views {
+    /// The points about their centroid.
+    points: Vec<DVec3>,
     cell: f64,
     gap: f64,
     xy: Vec<(f64, f64)>,
@@ -55,15 +45,14 @@ struct Views<'a> {
     index: Vec<usize>,
 }
 
-impl Views<'_> {
+impl Views {
     /// Points hidden behind another point of their cell, looking along `-v`.
     fn hidden(&mut self, v: DVec3) -> usize {
-        let (u, w) = basis(v);
+        let (u, w) = v.any_orthonormal_pair();
         self.xy.clear();
         self.depth.clear();
         let (mut lo, mut hi) = ((f64::MAX, f64::MAX), (f64::MIN, f64::MIN));
-        for p in self.points {
-            let d = *p - self.centre;
+        for d in &self.points {
             let q = (d.dot(u), d.dot(w));
             lo = (lo.0.min(q.0), lo.1.min(q.1));
             hi = (hi.0.max(q.0), hi.1.max(q.1));
@@ -94,20 +83,18 @@ impl Views<'_> {
 
 /// The fraction of `points` hidden behind another point of their image cell, seen
 /// from the direction that hides the fewest (module doc); `None` below 16 points or
-/// for a degenerate cloud. About 50 ms for 1024 points.
-pub fn layered_fraction(points: &[DVec3]) -> Option<f64> {
+/// for a degenerate cloud. About 8 ms for 1024 points.
+pub fn layered_fraction(points: &[Vec3]) -> Option<f64> {
     if points.len() < 16 {
         return None;
     }
-    let centre = points.iter().copied().sum::<DVec3>() / points.len() as f64;
-    let p32: Vec<_> = points.iter().map(|p| p.as_vec3()).collect();
-    let h = point_spacing(&p32);
+    let h = point_spacing(points);
     if !(h > 0.0 && h.is_finite()) {
         return None;
     }
+    let centre = points.iter().map(|p| p.as_dvec3()).sum::<DVec3>() / points.len() as f64;
     let mut views = Views {
-        points,
-        centre,
+        points: points.iter().map(|p| p.as_dvec3() - centre).collect(),
         cell: CELL * h,
         gap: LAYER_GAP * h,
         xy: Vec::with_capacity(points.len()),
@@ -122,7 +109,7 @@ pub fn layered_fraction(points: &[DVec3]) -> Option<f64> {
     // Local refinement: eight neighbours on a ring, halving it when none is better.
     let mut step = (4.0 * std::f64::consts::PI / DIRECTIONS as f64).sqrt();
     for _ in 0..6 {
-        let (u, w) = basis(best.1);
+        let (u, w) = best.1.any_orthonormal_pair();
         let mut improved = false;
         for k in 0..8 {
             let a = k as f64 * std::f64::consts::FRAC_PI_4;
@@ -149,10 +136,14 @@ mod tests {
         fibonacci(n)
     }
 
+    fn f32s(v: &[DVec3]) -> Vec<Vec3> {
+        v.iter().map(|p| p.as_vec3()).collect()
+    }
+
     #[test]
     fn a_whole_sphere_is_two_layers_and_one_side_of_it_is_one() {
         let all = sphere(2000);
-        let whole = layered_fraction(&all).unwrap();
+        let whole = layered_fraction(&f32s(&all)).unwrap();
         assert!(whole > 0.3, "whole sphere {whole}");
         // What a camera 3 radii out (about +x) sees: the cap where p · ĉ > 1/3.
         let cam = DVec3::new(1.0, 0.3, -0.2).normalize();
@@ -161,7 +152,7 @@ mod tests {
             .copied()
             .filter(|p| p.dot(cam) > 1.0 / 3.0)
             .collect();
-        let one = layered_fraction(&seen).unwrap();
+        let one = layered_fraction(&f32s(&seen)).unwrap();
         assert!(one < 0.03, "one side {one}");
         // Two spheres, one seen in front of the other: the far one's hidden part is
         // missing, so the view is still one layer.
@@ -170,13 +161,13 @@ mod tests {
             .map(|p| *p * 0.5 - cam * 2.0 + DVec3::Y * 0.4)
             .collect();
         let both: Vec<DVec3> = seen.iter().copied().chain(far).collect();
-        let pair = layered_fraction(&both).unwrap();
+        let pair = layered_fraction(&f32s(&both)).unwrap();
         assert!(pair < 0.2, "pair {pair}");
     }
 
     #[test]
     fn too_few_or_identical_points_give_no_answer() {
-        assert!(layered_fraction(&sphere(10)).is_none());
-        assert!(layered_fraction(&[DVec3::ONE; 40]).is_none());
+        assert!(layered_fraction(&f32s(&sphere(10))).is_none());
+        assert!(layered_fraction(&[Vec3::ONE; 40]).is_none());
     }
 }
