@@ -17,7 +17,9 @@ use super::project::{motions_from_canonical, project_joints, JointResidual};
 use super::refine::{refine, RefineOptions, RefineReport};
 use super::screw::{state_range, PartExtent};
 use super::spatial::pair_distances;
+use super::spin_free::{spin_free_hinges, subtree_fit, SpinFree, KEEP_SLACK, PROPOSE_SLACK};
 use super::tree::{least_motion_root, pair_costs, part_motion, spanning_tree};
+use crate::geom::knn::Grid;
 use crate::geom::se3::rigid_inverse;
 use crate::io::gt::JointType;
 use crate::io::result::FitResult;
@@ -48,6 +50,9 @@ pub struct KinOptions {
     /// (`kinematics::flips`), search every child's pose again along its joint
     /// (`kinematics::joint_sweep`), then build the tree again.
     pub flips: bool,
+    /// After the refinement, give each symmetric leaf part the hinge perpendicular to
+    /// its symmetry axis where that fits the clouds as well (`kinematics::spin_free`).
+    pub spin_free: bool,
     /// The refinement keeps the root's observed motion when the root is still
     /// (`root_is_still`, with the merge threshold) instead of refining it. Meant for
     /// occluded input: there the refinement's Chamfer compares frame c's view with
@@ -74,6 +79,7 @@ impl Default for KinOptions {
             pose_tolerance: Some(super::observed::AGREE_TOL),
             polish: true,
             flips: true,
+            spin_free: true,
             keep_still_root: false,
         }
     }
@@ -109,6 +115,8 @@ pub struct KinReport {
     /// (part, frame) motions replaced by a better-fitting pose found along the joint
     /// (`kinematics::joint_sweep`), over all repair rounds.
     pub swept: usize,
+    /// Hinges replaced by their spin-free version (`kinematics::spin_free`).
+    pub spin_free: Vec<SpinFree>,
     /// (stage, seconds) from the caller's clock.
     pub timings: Vec<(String, f64)>,
 }
@@ -311,6 +319,64 @@ fn polished_input(
     obs
 }
 
+/// Proposes the spin-free hinge for symmetric leaf parts (`kinematics::spin_free`),
+/// refines the model again from there (so pivots and states follow the new axes, held
+/// near them by the axis prior), and keeps the proposals whose part still fits the
+/// clouds within `KEEP_SLACK` of the first refinement's, when the model's loss is no
+/// worse than `LOSS_SLACK` times the first refinement's. The proposals that fail are
+/// left out and the rest tried once more.
+fn spin_free_refined(
+    result: &mut FitResult,
+    points: &[Vec<Vec3>],
+    ro: &RefineOptions,
+    first: &RefineReport,
+    limit_pad: f64,
+    progress: &mut dyn FnMut(&Progress) -> Control,
+) -> crate::Result<Vec<SpinFree>> {
+    const LOSS_SLACK: f64 = 1.01;
+    let grids: Vec<Grid> = points.iter().map(|p| Grid::new(p)).collect();
+    let base_loss = if first.accepted {
+        first.loss_after
+    } else {
+        first.loss_before
+    };
+    let mut allowed: Vec<bool> = vec![true; result.parts];
+    for _ in 0..2 {
+        let mut alt = result.clone();
+        let changes = spin_free_hinges(&mut alt, points, &grids, limit_pad, PROPOSE_SLACK, &|p| {
+            allowed.get(p).copied().unwrap_or(false)
+        });
+        if changes.is_empty() {
+            return Ok(Vec::new());
+        }
+        let rep = refine(&mut alt, points, ro, limit_pad, progress)?;
+        let loss = if rep.accepted {
+            rep.loss_after
+        } else {
+            rep.loss_before
+        };
+        let failed: Vec<usize> = changes
+            .iter()
+            .filter(|ch| {
+                subtree_fit(&alt, points, &grids, ch.child)
+                    > KEEP_SLACK * subtree_fit(result, points, &grids, ch.child)
+            })
+            .map(|ch| ch.child)
+            .collect();
+        if failed.is_empty() && loss <= LOSS_SLACK * base_loss {
+            *result = alt;
+            return Ok(changes);
+        }
+        if failed.is_empty() {
+            return Ok(Vec::new());
+        }
+        for p in failed {
+            allowed[p] = false;
+        }
+    }
+    Ok(Vec::new())
+}
+
 /// Steps 2 and 3 from Step 1's output: working points `points[k]`, their part labels
 /// `labels[k]` and the part poses `poses[k][p]` (only relative motions matter).
 /// Returns the articulated model (labels relabelled to merged parts, one per input
@@ -454,6 +520,21 @@ pub fn build_articulated(
         );
     };
     let mut result = result;
+    let spin_free = match (&opts.refine, &refine_report) {
+        (Some(ro), Some(rep)) if opts.spin_free => {
+            let t = clock();
+            let still =
+                opts.keep_still_root && root_is_still(&merged.poses, root, opts.merge.threshold);
+            let ro = RefineOptions {
+                root: ro.root && !still,
+                ..ro.clone()
+            };
+            let kept = spin_free_refined(&mut result, points, &ro, rep, opts.limit_pad, progress)?;
+            refine_s += clock() - t;
+            kept
+        }
+        _ => Vec::new(),
+    };
     let canon_labels = result.labels[canonical].clone();
     let poses_replaced = match opts.pose_tolerance {
         Some(tol) => {
@@ -501,6 +582,7 @@ pub fn build_articulated(
         poses_replaced,
         flips: flipped,
         swept,
+        spin_free,
         timings,
     };
     Ok((result, report))

@@ -132,7 +132,7 @@ fn scatter(pts: &[DVec3], mean: DVec3) -> Matrix3<f64> {
 }
 
 /// Median of `v` (reordered); `v` must not be empty.
-fn median(v: &mut [f64]) -> f64 {
+pub(crate) fn median(v: &mut [f64]) -> f64 {
     let mid = v.len() / 2;
     *v.select_nth_unstable_by(mid, |x, y| x.total_cmp(y)).1
 }
@@ -150,7 +150,7 @@ fn fits_cloud(
 }
 
 /// Centroid and unit principal axes of `pts`.
-fn principal_axes(pts: &[DVec3]) -> (DVec3, [DVec3; 3]) {
+pub(crate) fn principal_axes(pts: &[DVec3]) -> (DVec3, [DVec3; 3]) {
     let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
     let e = SymmetricEigen::new(scatter(pts, c));
     let axis = |k: usize| {
@@ -176,7 +176,7 @@ fn half_turns(c: DVec3, axes: &[DVec3; 3]) -> Vec<DMat4> {
 /// Principal axes about which `pts` look the same at any turn: turned by each of
 /// `SPIN_PROBES` they fit themselves (trimmed mean squared distance) within
 /// `SPIN_SLACK` of `noise`, the part's typical fit to the frames' clouds.
-fn spin_axes(pts: &[DVec3], c: DVec3, axes: &[DVec3; 3], noise: f64) -> Vec<DVec3> {
+pub(crate) fn spin_axes(pts: &[DVec3], c: DVec3, axes: &[DVec3; 3], noise: f64) -> Vec<DVec3> {
     let own = Grid::new(&pts.iter().map(|p| p.as_vec3()).collect::<Vec<_>>());
     let mut buf = Vec::new();
     axes.iter()

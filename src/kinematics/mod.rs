@@ -12,6 +12,7 @@ pub mod refine;
 pub mod relabel;
 pub mod screw;
 pub mod spatial;
+pub mod spin_free;
 pub mod tree;
 
 pub use build::{build_articulated, KinOptions, KinReport};
