@@ -232,8 +232,8 @@ pub fn finish(
         // Nor the symmetry repair: a half-turned part's fit to a one-sided cloud says
         // little (seed 0, fast: recon 14.86 → 15.92, TED 5.0 → 5.6 with it).
         kin_opts.flips = false;
-        // Nor, for the same reason, the spin-free hinges (`kinematics::spin_free`,
-        // not measured on occluded input).
+        // Nor, for the same reason, the spin-free hinges (`kinematics::spin_free`;
+        // bench-dev occluded, fast, seed 0: identical metrics with them).
         kin_opts.spin_free = false;
         // Nor the still root's motion (see `KinOptions::keep_still_root`): bench-dev
         // occluded, the seven robots, recon / flow, fast seed 0: 12.61 → 10.62 / 14.31

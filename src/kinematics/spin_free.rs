@@ -317,6 +317,7 @@ fn spin_free(
 mod tests {
     use super::*;
     use crate::io::result::{ResultTree, FORMAT, VERSION};
+    use crate::kinematics::flips::tests::{posed, turn};
     use rand::{rngs::StdRng, Rng, SeedableRng};
 
     const PIVOT: DVec3 = DVec3::new(0.0, 0.0, 0.12);
@@ -353,22 +354,8 @@ mod tests {
     fn tilted(tilt: f64) -> (FitResult, Vec<Vec<Vec3>>) {
         let k = STATES.len();
         let (pts, labels) = scene(0);
-        let frames: Vec<Vec<Vec3>> = (0..k)
-            .map(|t| {
-                let (p, l) = scene(t as u64 + 1);
-                let m = turn(DVec3::Y, STATES[t], PIVOT);
-                p.iter()
-                    .zip(&l)
-                    .map(|(x, &l)| {
-                        if l == 0 {
-                            *x
-                        } else {
-                            m.transform_point3(x.as_dvec3()).as_vec3()
-                        }
-                    })
-                    .collect()
-            })
-            .collect();
+        let truth: Vec<DMat4> = STATES.iter().map(|&q| turn(DVec3::Y, q, PIVOT)).collect();
+        let frames = posed(&truth, |t| scene(t as u64 + 1));
         let mut frames = frames;
         frames[0] = pts;
         let b = tilt.to_radians();
@@ -451,10 +438,6 @@ mod tests {
             spin_free_hinges(&mut res, &frames, &grids, 0.0, PROPOSE_SLACK, &|_| true).is_empty()
         );
         assert_eq!(res.joints, joints);
-    }
-
-    fn turn(axis: DVec3, angle: f64, pivot: DVec3) -> DMat4 {
-        screw_exp(JointType::Revolute, axis, pivot, angle)
     }
 
     #[test]
