@@ -10,8 +10,8 @@ use serde::Serialize;
 use super::flips::Repair;
 use super::merge::{absorb, merge_loss, merge_parts, MergeEvent, MergeOptions};
 use super::observed::{
-    keep_faithful_poses, object_size, observed_motion, polish_motions, polish_poses,
-    AGREE_SPACINGS, POLISH_GAIN, POLISH_KEEP, POLISH_ROUNDS,
+    keep_faithful_poses, object_size, observed_motion, points_by_part, polish_motions,
+    polish_poses, AGREE_SPACINGS, POLISH_GAIN, POLISH_KEEP, POLISH_ROUNDS,
 };
 use super::project::{motions_from_canonical, project_joints, JointResidual};
 use super::refine::{refine, RefineOptions, RefineReport};
@@ -50,8 +50,9 @@ pub struct KinOptions {
     /// (`kinematics::flips`), search every child's pose again along its joint
     /// (`kinematics::joint_sweep`), then build the tree again.
     pub flips: bool,
-    /// After the refinement, give each symmetric leaf part the hinge perpendicular to
-    /// its symmetry axis where that fits the clouds as well (`kinematics::spin_free`).
+    /// After the refinement, give a symmetric part whose hinge is tilted towards its
+    /// symmetry axis the hinge perpendicular to that axis, where that fits the clouds
+    /// as well (`kinematics::spin_free`).
     pub spin_free: bool,
     /// The refinement keeps the root's observed motion when the root is still
     /// (`root_is_still`, with the merge threshold) instead of refining it. Meant for
@@ -319,9 +320,20 @@ fn polished_input(
     obs
 }
 
-/// Proposes the spin-free hinge for symmetric leaf parts (`kinematics::spin_free`),
-/// refines the model again from there (so pivots and states follow the new axes, held
-/// near them by the axis prior), and keeps the proposals whose part still fits the
+/// The refinement's options: `opts.refine`, with the root held where it is still
+/// (`KinOptions::keep_still_root`). None: no refinement.
+fn refine_options(opts: &KinOptions, poses: &[Vec<DMat4>], root: usize) -> Option<RefineOptions> {
+    let ro = opts.refine.as_ref()?;
+    let still = opts.keep_still_root && root_is_still(poses, root, opts.merge.threshold);
+    Some(RefineOptions {
+        root: ro.root && !still,
+        ..ro.clone()
+    })
+}
+
+/// Proposes spin-free hinges for symmetric parts (`kinematics::spin_free`), refines
+/// the model again from there (so pivots and states follow the new axes, held near
+/// them by the axis prior), and keeps the proposals whose subtree still fits the
 /// clouds within `KEEP_SLACK` of the first refinement's, when the model's loss is no
 /// worse than `LOSS_SLACK` times the first refinement's. The proposals that fail are
 /// left out and the rest tried once more.
@@ -335,6 +347,8 @@ fn spin_free_refined(
 ) -> crate::Result<Vec<SpinFree>> {
     const LOSS_SLACK: f64 = 1.01;
     let grids: Vec<Grid> = points.iter().map(|p| Grid::new(p)).collect();
+    let c = result.canonical_frame;
+    let by_part = points_by_part(&points[c], &result.labels[c], result.parts);
     let base_loss = if first.accepted {
         first.loss_after
     } else {
@@ -358,8 +372,8 @@ fn spin_free_refined(
         let failed: Vec<usize> = changes
             .iter()
             .filter(|ch| {
-                subtree_fit(&alt, points, &grids, ch.child)
-                    > KEEP_SLACK * subtree_fit(result, points, &grids, ch.child)
+                subtree_fit(&alt, &grids, &by_part, ch.child)
+                    > KEEP_SLACK * subtree_fit(result, &grids, &by_part, ch.child)
             })
             .map(|ch| ch.child)
             .collect();
@@ -489,16 +503,8 @@ pub fn build_articulated(
             continue;
         }
         progress_to(progress, Stage::Joints, 0, 1, vec![])?;
-        let refine_report = match &opts.refine {
-            Some(ro) => {
-                let still = opts.keep_still_root
-                    && root_is_still(&merged.poses, root, opts.merge.threshold);
-                let ro = RefineOptions {
-                    root: ro.root && !still,
-                    ..ro.clone()
-                };
-                Some(refine(&mut result, points, &ro, opts.limit_pad, progress)?)
-            }
+        let refine_report = match refine_options(opts, &merged.poses, root) {
+            Some(ro) => Some(refine(&mut result, points, &ro, opts.limit_pad, progress)?),
             None => None,
         };
         refine_s += clock() - tc;
@@ -520,15 +526,9 @@ pub fn build_articulated(
         );
     };
     let mut result = result;
-    let spin_free = match (&opts.refine, &refine_report) {
+    let spin_free = match (refine_options(opts, &merged.poses, root), &refine_report) {
         (Some(ro), Some(rep)) if opts.spin_free => {
             let t = clock();
-            let still =
-                opts.keep_still_root && root_is_still(&merged.poses, root, opts.merge.threshold);
-            let ro = RefineOptions {
-                root: ro.root && !still,
-                ..ro.clone()
-            };
             let kept = spin_free_refined(&mut result, points, &ro, rep, opts.limit_pad, progress)?;
             refine_s += clock() - t;
             kept

@@ -1,6 +1,6 @@
-//! Spin-free hinges for rotationally symmetric leaf parts (an addition to Step 3).
+//! Spin-free hinges for rotationally symmetric parts (an addition to Step 3).
 //!
-//! A leaf part that looks the same at any turn about one of its own axes `u` (a
+//! A part that looks the same at any turn about one of its own axes `u` (a
 //! capsule, a cylinder: the procedural quadruped's shanks) shows in each frame only
 //! where `u` points and where its centre is; a turn about `u` moves its points along
 //! its own surface. Step 1's poses carry such turns at random, and the hinge fitted to
@@ -14,8 +14,11 @@
 //! one that adds no invisible spin: its axis is the normal of the plane the images of
 //! `u` span (made exactly perpendicular to `u`), its states the turns of `u` within
 //! that plane, and its pivot the point that carries the part's centre where the fitted
-//! joint does (`screw::fit_pivot`). It replaces the fitted hinge when it fits the
-//! frames' clouds (trimmed, as `observed::trimmed_fit`) within `SLACK` of it.
+//! joint does (`screw::fit_pivot`). It replaces a hinge tilted at least
+//! `MIN_TILT_DEG` towards `u` when the part and its descendants fit the frames' clouds
+//! (trimmed, as `observed::trimmed_fit`) within a slack of it; the part's children keep
+//! their motion, their joints fitted again. `kinematics::build` then refines the model
+//! once more and keeps the change only if it still fits (`KEEP_SLACK`).
 
 use glam::{DMat3, DMat4, DVec3, Vec3};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
@@ -47,8 +50,8 @@ const SAME_AXIS: f64 = 0.0175;
 /// Only a hinge tilted at least this far (degrees) from the plane perpendicular to
 /// the symmetry axis is replaced: a spin that large is Step 1's artefact, while a
 /// smaller tilt is as often the real hinge seen through a noisy segmentation
-/// (bench-dev full solo12, fast, seed 0: tilts of 5–10° taken away made two axes
-/// 3–6° worse).
+/// (bench-dev full solo12, fast, seed 0: with tilts of 5–10° taken away, axes went
+/// 3.3 → 11.7°, 4.5 → 5.6° and 6.1 → 11.1°).
 const MIN_TILT_DEG: f64 = 15.0;
 /// Parts with fewer canonical points are left alone.
 const MIN_POINTS: usize = 24;
@@ -91,10 +94,14 @@ pub fn spin_free_hinges(
         return Vec::new();
     }
     let by_part = points_by_part(&points[c], &result.labels[c], parts);
+    let mut poses: Vec<Vec<DMat4>> = result.poses[..k]
+        .iter()
+        .map(|f| f.iter().map(from_row_major).collect())
+        .collect();
+    let mut joints = result.joints.clone().unwrap_or_default();
     let mut buf = Vec::new();
     let mut changes = Vec::new();
     for ch in bfs_order(&parent) {
-        let joints = result.joints.clone().unwrap_or_default();
         let Some(ji) = joints.iter().position(|j| j.child == ch) else {
             continue;
         };
@@ -107,22 +114,7 @@ pub fn spin_free_hinges(
         {
             continue;
         }
-        let poses: Vec<Vec<DMat4>> = result.poses[..k]
-            .iter()
-            .map(|f| f.iter().map(from_row_major).collect())
-            .collect();
         let sub = subtree(&parent, ch);
-        let fit_of = |poses: &[Vec<DMat4>], buf: &mut Vec<f64>| -> f64 {
-            sub.iter()
-                .map(|&p| {
-                    (0..k)
-                        .map(|t| {
-                            trimmed_fit(&grids[t], &by_part[p], &poses[t][p], POLISH_KEEP, buf)
-                        })
-                        .sum::<f64>()
-                })
-                .sum()
-        };
         let pts = &by_part[ch];
         let (axis, pivot) = (DVec3::from(jt.axis), DVec3::from(jt.pivot));
         let mut own: Vec<f64> = (0..k)
@@ -182,7 +174,10 @@ pub fn spin_free_hinges(
                 f[d] = f[j.parent] * screw_exp(jt2, a, p, q);
             }
         }
-        let (before, after) = (fit_of(&poses, &mut buf), fit_of(&new_poses, &mut buf));
+        let (before, after) = (
+            parts_fit(&grids[..k], &by_part, &sub, |t, p| poses[t][p]),
+            parts_fit(&grids[..k], &by_part, &sub, |t, p| new_poses[t][p]),
+        );
         if after.is_nan() || after > slack * before {
             continue;
         }
@@ -197,8 +192,10 @@ pub fn spin_free_hinges(
                 out[d] = to_row_major(&f[d]);
             }
         }
-        result.joints = Some(cand);
+        poses = new_poses;
+        joints = cand;
     }
+    result.joints = Some(joints);
     changes
 }
 
@@ -230,29 +227,34 @@ fn subtree(parent: &[i64], p: usize) -> Vec<usize> {
 }
 
 /// Summed trimmed fit (as `observed::trimmed_fit`) of the canonical points of part
-/// `p` and its descendants, moved by the result's poses, to every frame's cloud.
-pub fn subtree_fit(result: &FitResult, points: &[Vec<Vec3>], grids: &[Grid], p: usize) -> f64 {
-    let c = result.canonical_frame;
+/// `p` and its descendants (`by_part`: the canonical points of every part), moved by
+/// the result's poses, to every frame's cloud (`grids`).
+pub fn subtree_fit(result: &FitResult, grids: &[Grid], by_part: &[Vec<DVec3>], p: usize) -> f64 {
     let Some(tree) = result.tree.as_ref() else {
         return 0.0;
     };
-    let by_part = points_by_part(&points[c], &result.labels[c], result.parts);
+    let k = grids.len().min(result.poses.len());
+    parts_fit(&grids[..k], by_part, &subtree(&tree.parent, p), |t, q| {
+        from_row_major(&result.poses[t][q])
+    })
+}
+
+/// Σ over `parts` and frames t of the trimmed fit of the part's points moved by
+/// `pose(t, part)` to frame t's cloud (`grids[t]`).
+fn parts_fit(
+    grids: &[Grid],
+    by_part: &[Vec<DVec3>],
+    parts: &[usize],
+    pose: impl Fn(usize, usize) -> DMat4,
+) -> f64 {
     let mut buf = Vec::new();
-    subtree(&tree.parent, p)
-        .into_iter()
-        .map(|q| {
+    parts
+        .iter()
+        .map(|&q| {
             grids
                 .iter()
-                .zip(&result.poses)
-                .map(|(g, f)| {
-                    trimmed_fit(
-                        g,
-                        &by_part[q],
-                        &from_row_major(&f[q]),
-                        POLISH_KEEP,
-                        &mut buf,
-                    )
-                })
+                .enumerate()
+                .map(|(t, g)| trimmed_fit(g, &by_part[q], &pose(t, q), POLISH_KEEP, &mut buf))
                 .sum::<f64>()
         })
         .sum()
@@ -399,11 +401,15 @@ mod tests {
         (res, frames)
     }
 
+    fn parts_of(res: &FitResult, frames: &[Vec<Vec3>]) -> Vec<Vec<DVec3>> {
+        points_by_part(&frames[0], &res.labels[0], res.parts)
+    }
+
     #[test]
     fn a_symmetric_leaf_on_a_tilted_hinge_gets_the_perpendicular_one() {
         let (mut res, frames) = tilted(35.0);
         let grids: Vec<Grid> = frames.iter().map(|f| Grid::new(f)).collect();
-        let before = subtree_fit(&res, &frames, &grids, 1);
+        let before = subtree_fit(&res, &grids, &parts_of(&res, &frames), 1);
         let changes = spin_free_hinges(&mut res, &frames, &grids, 0.0, PROPOSE_SLACK, &|_| true);
         assert_eq!(changes.len(), 1, "{changes:?}");
         let j = &res.joints.as_ref().unwrap()[0];
@@ -426,7 +432,7 @@ mod tests {
         // The poses follow the new joint, and fit the clouds no worse.
         let fk = turn(axis, j.state[3], p);
         assert!(from_row_major(&res.poses[3][1]).abs_diff_eq(fk, 1e-9));
-        assert!(subtree_fit(&res, &frames, &grids, 1) <= before * 1.01);
+        assert!(subtree_fit(&res, &grids, &parts_of(&res, &frames), 1) <= before * 1.01);
     }
 
     #[test]
