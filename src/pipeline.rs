@@ -360,8 +360,13 @@ pub fn finish(
         result.parts
     ));
     if step1.held_still > 0 {
+        let why = if step1.occlusion_used {
+            "the frames agree better with no motion than with theirs"
+        } else {
+            "the root turned about an axis it looks the same about, which the clouds cannot see"
+        };
         notes.push(format!(
-            "{} of {} Gaussians were held still in every frame (the frames agree better with no motion than with theirs)",
+            "{} of {} Gaussians were held still in every frame ({why})",
             step1.held_still, step1.m
         ));
     }

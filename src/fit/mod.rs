@@ -49,7 +49,8 @@ pub struct Step1Result {
     pub candidates: Vec<(usize, f64)>,
     /// Fits per candidate (the best of them stands for its m).
     pub restarts: usize,
-    /// Gaussians held still in every frame (occluded input, `hold_still`).
+    /// Gaussians held still in every frame (`hold_still`: on occluded input, and on full
+    /// input a root whose turn the clouds cannot see).
     pub held_still: usize,
     pub timings: Timings,
 }

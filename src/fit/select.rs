@@ -370,7 +370,7 @@ fn fit_once(
     let held = if prep.occluded {
         hold_still::hold_still(&prep.data, &mut params)
     } else {
-        0
+        hold_still::hold_spinning_root(&prep.data, &mut params)
     };
     #[cfg(not(target_arch = "wasm32"))]
     let secs = t0.elapsed().as_secs_f64();
