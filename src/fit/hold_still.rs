@@ -65,9 +65,9 @@ const SPIN_SLACK: f64 = 0.02;
 
 /// `hold_spinning_root`: the root's own motion must carry its points this many point
 /// spacings on average (over its points and frames), so a root that is already still
-/// up to noise is left as it is. The least-moving group's mean displacement was 0.4–2.1
-/// spacings on bench-dev full (fast, seeds 0–2) and on the procedural laptop, cabinet,
-/// quadruped and hand; 3–12 on the arm, whose base turned with its shoulder.
+/// up to noise is left as it is. The least-moving group's mean displacement was at most
+/// 2.1 spacings on bench-dev full (fast, seed 0: talos, 0.015) and below 1 on the
+/// procedural laptop and cabinet; 3–12 on the arm, whose base turned with its shoulder.
 const SPIN_SPACINGS: f64 = 4.0;
 
 /// Gaussians sharing one motion in every frame (the snap gives a rigid group one
