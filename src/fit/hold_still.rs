@@ -283,13 +283,18 @@ mod tests {
         let mut params = posed(&frames, &lab0, &ANGLES, |_| DVec3::ZERO, wrong);
         let arm_before: Vec<_> = (0..ANGLES.len()).map(|t| params.gauss(t, 1)).collect();
         assert_eq!(hold_still(&data, &mut params), 1);
+        assert_base_held(&params, &arm_before);
+    }
+
+    /// Gaussian 0 (the base) has frame 0's pose in every frame, and Gaussian 1 (the
+    /// moving arm) kept its (right) poses `arm`.
+    fn assert_base_held(params: &Params, arm: &[crate::fit::gaussians::Gauss]) {
         let b0 = params.gauss(0, 0);
-        for (t, arm) in arm_before.iter().enumerate() {
+        for (t, a) in arm.iter().enumerate() {
             let b = params.gauss(t, 0);
             assert!(b.mu.distance(b0.mu) < 1e-9, "frame {t}: base not held");
             assert!(b.r.abs_diff_eq(b0.r, 1e-9), "frame {t}: base turned");
-            // The moving arm keeps its (right) motion.
-            assert_eq!(params.gauss(t, 1).mu, arm.mu, "frame {t}: arm changed");
+            assert_eq!(params.gauss(t, 1).mu, a.mu, "frame {t}: arm changed");
         }
     }
 
@@ -390,15 +395,7 @@ mod tests {
         let mut params = turntable_params(&frames, &lab0, &spin, |_| DVec3::ZERO);
         let bar: Vec<_> = (0..ARM.len()).map(|t| params.gauss(t, 1)).collect();
         assert_eq!(hold_spinning_root(&data, &mut params), 1);
-        let b0 = params.gauss(0, 0);
-        for (t, g) in bar.iter().enumerate() {
-            let b = params.gauss(t, 0);
-            assert!(
-                b.mu.distance(b0.mu) < 1e-9 && b.r.abs_diff_eq(b0.r, 1e-9),
-                "frame {t}: base not held"
-            );
-            assert_eq!(params.gauss(t, 1).mu, g.mu, "frame {t}: bar changed");
-        }
+        assert_base_held(&params, &bar);
     }
 
     #[test]
