@@ -129,21 +129,24 @@ pub fn hold_spinning_root(data: &Data, params: &mut Params) -> usize {
         }
         sum / n.max(1) as f64
     };
-    let Some((root, moved)) = motion_groups(&rel)
+    let Some((root, n, moved)) = motion_groups(&rel)
         .into_iter()
-        .filter(|g| g.iter().map(|&i| points[i].len()).sum::<usize>() * 10 >= total)
         .map(|g| {
-            let d = displacement(&g);
-            (g, d)
+            let n: usize = g.iter().map(|&i| points[i].len()).sum();
+            (g, n)
         })
-        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .filter(|&(_, n)| n * 10 >= total)
+        .map(|(g, n)| {
+            let d = displacement(&g);
+            (g, n, d)
+        })
+        .min_by(|a, b| a.2.total_cmp(&b.2))
     else {
         return 0;
     };
     if moved < SPIN_SPACINGS * crate::geom::knn::point_spacing(&data.frames32[0]) {
         return 0;
     }
-    let n: usize = root.iter().map(|&i| points[i].len()).sum();
     for (t, grid) in data.grids.iter().enumerate().skip(1) {
         let off = |carry: &dyn Fn(usize, DVec3) -> DVec3| {
             let mut count = 0usize;
