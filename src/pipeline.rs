@@ -191,13 +191,17 @@ pub fn finish(
 ) -> crate::Result<FitOutput> {
     use crate::io::result::ResultGaussian;
     let k = seq.frames.len();
-    if step1.labels.len() != k || step1.working.len() != k || step1.model.frames != k {
+    if step1.labels.len() != k
+        || step1.working.len() != k
+        || step1.model.frames != k
+        || step1.canonical >= k
+    {
         return Err(crate::Error::Sequence(format!(
             "the Step-1 model has {} frames but the sequence {k}",
             step1.model.frames
         )));
     }
-    let canonical = 0;
+    let canonical = step1.canonical;
     // Steps 2–3 work in Step 1's fit units (see `normalisation`); the Step-1 model
     // comes in input units.
     let norm = step1.norm;

@@ -27,6 +27,9 @@ pub struct Data {
     pub frames32: Vec<Vec<Vec3>>,
     pub frames: Vec<Vec<DVec3>>,
     pub grids: Vec<Grid>,
+    /// Per frame, the earlier frame the occluded search poses it from (`t − 1` unless
+    /// set; see `start_frame::FrameOrder`).
+    pub track_from: Vec<usize>,
     /// The pose search's distance cap and, per frame, the places beyond it (built
     /// by `pose_search` on first use, then shared by its searches and candidates).
     pub(crate) search_cap: std::sync::OnceLock<pose_search::SearchCap>,
@@ -39,10 +42,12 @@ impl Data {
             .map(|f| f.iter().map(|p| p.as_dvec3()).collect())
             .collect();
         let grids = frames32.iter().map(|f| Grid::new(f)).collect();
+        let track_from = (0..frames32.len()).map(|t| t.saturating_sub(1)).collect();
         Data {
             frames32,
             frames,
             grids,
+            track_from,
             search_cap: std::sync::OnceLock::new(),
         }
     }

@@ -15,6 +15,7 @@ pub mod pose_search;
 pub mod rot6d;
 pub mod schedule;
 pub mod select;
+pub mod start_frame;
 
 pub use gaussians::GaussianModel;
 
@@ -43,6 +44,9 @@ pub struct Step1Result {
     /// Model-selection Chamfer of the selected candidate (`fitter::final_chamfer`).
     pub final_chamfer: f64,
     pub occlusion_used: bool,
+    /// The frame the Gaussians were placed on (`start_frame`): the result's canonical
+    /// frame.
+    pub canonical: usize,
     pub iterations: usize,
     pub m: usize,
     /// Every candidate tried: (m, final Chamfer).

@@ -11,6 +11,7 @@ use super::fitter::{self, Data, FitConfig, FlowField};
 use super::flow::OtFlow;
 use super::hold_still;
 use super::schedule::Schedule;
+use super::start_frame::{self, FrameOrder};
 use super::{Step1Result, Timings};
 use crate::io::sequence::Sequence;
 use crate::normalisation::Normalisation;
@@ -143,9 +144,14 @@ fn validate(seq: &Sequence) -> Result<()> {
 pub struct Prepared {
     /// Input → fit units (`data` is in fit units; results are mapped back).
     pub norm: Normalisation,
+    /// The working clouds in visiting order (`order`), tracked as it says.
     pub data: Data,
+    /// Per input frame (input order): the working points' indices in the frame.
     pub working: Vec<Vec<u32>>,
     pub occluded: bool,
+    /// The order Step 1 visits the frames in: from frame 0 on full input, from the
+    /// frame with the most input points on occluded input (`start_frame`).
+    pub order: FrameOrder,
     pub sched: Schedule,
     pub flow: Option<FlowField>,
 }
@@ -175,7 +181,14 @@ pub fn prepare(seq: &Sequence, opts: &FitOptions) -> Result<Prepared> {
     if let Some(it) = opts.iters {
         sched = sched.with_iters(it);
     }
-    let data = Data::new(clouds);
+    let sizes: Vec<usize> = seq.frames.iter().map(|f| f.points.len()).collect();
+    let order = if occluded {
+        FrameOrder::from_start(sizes.len(), start_frame::most_points(&sizes))
+    } else {
+        FrameOrder::identity(sizes.len())
+    };
+    let mut data = Data::new(order.permute(&clouds));
+    data.track_from = order.track_from.clone();
     let flow = (USE_FLOW && !occluded)
         .then(|| FlowField::compute(&data, &OtFlow::default(), 256, opts.seed));
     Ok(Prepared {
@@ -183,6 +196,7 @@ pub fn prepare(seq: &Sequence, opts: &FitOptions) -> Result<Prepared> {
         data,
         working,
         occluded,
+        order,
         sched,
         flow,
     })
@@ -349,11 +363,13 @@ fn fit_once(
     }
     #[cfg(not(target_arch = "wasm32"))]
     let t0 = std::time::Instant::now();
-    // Snapshots go out in input units.
+    // Snapshots go out in input units and input frame numbers.
+    let start = prep.order.start();
     let mut report = |p: &Progress| match &p.snapshot {
-        Some(s) if !prep.norm.is_identity() => {
+        Some(s) if !prep.norm.is_identity() || start != 0 => {
             let mut s = s.clone();
             prep.norm.snapshot_to_input(&mut s);
+            s.frame = prep.order.order.get(s.frame).copied().unwrap_or(s.frame);
             cb(&Progress {
                 snapshot: Some(s),
                 ..p.clone()
@@ -396,13 +412,15 @@ pub fn candidate_result(
 ) -> Step1Result {
     let final_chamfer = chamfer * prep.norm.scale * prep.norm.scale;
     let mut model = params.to_model();
-    let labels = prep
-        .data
-        .frames32
-        .iter()
-        .enumerate()
-        .map(|(k, f)| model.segment(k, f))
-        .collect();
+    let labels = prep.order.unpermute(
+        prep.data
+            .frames32
+            .iter()
+            .enumerate()
+            .map(|(k, f)| model.segment(k, f))
+            .collect(),
+    );
+    unpermute_model(&mut model, &prep.order);
     prep.norm.model_to_input(&mut model);
     Step1Result {
         model,
@@ -411,6 +429,7 @@ pub fn candidate_result(
         working: prep.working.clone(),
         final_chamfer,
         occlusion_used: prep.occluded,
+        canonical: prep.order.start(),
         iterations,
         m,
         candidates: vec![(m, final_chamfer)],
@@ -421,6 +440,17 @@ pub fn candidate_result(
             per_candidate: vec![(m, secs, iterations)],
         },
     }
+}
+
+/// Puts a model fitted in visiting order back in input frame order.
+fn unpermute_model(model: &mut super::GaussianModel, order: &FrameOrder) {
+    fn back<T: Clone>(v: &[T], m: usize, order: &FrameOrder) -> Vec<T> {
+        order
+            .unpermute(v.chunks(m.max(1)).map(<[T]>::to_vec).collect())
+            .concat()
+    }
+    model.rot6d = back(&model.rot6d, model.m, order);
+    model.center = back(&model.center, model.m, order);
 }
 
 /// The part counts a quality tries in `lo..=hi`: all of them, except Fast, which
@@ -807,6 +837,92 @@ mod size_rule_tests {
         }
         // One restart is the plain fit.
         assert_eq!(restart_seed(7, 0), 7);
+    }
+
+    /// A strip of `n[k]` points bending about x = 0.5 by 0.8·k rad in frame k.
+    fn bent_strip(n: &[usize]) -> Sequence {
+        Sequence {
+            frames: n
+                .iter()
+                .enumerate()
+                .map(|(k, &n)| Frame {
+                    name: format!("{k}.ply"),
+                    points: (0..n)
+                        .map(|i| {
+                            let u = (i % 40) as f32 / 40.0;
+                            let v = (i / 40) as f32 * 0.02;
+                            let a = if u > 0.5 { k as f32 * 0.8 } else { 0.0 };
+                            glam::Vec3::new(
+                                u.min(0.5) + (u - 0.5).max(0.0) * a.cos(),
+                                v,
+                                (u - 0.5).max(0.0) * a.sin(),
+                            )
+                        })
+                        .collect(),
+                    ..Default::default()
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn occluded_step1_starts_from_the_frame_with_the_most_points() {
+        // At least `OCCLUDED_SEARCH_MIN_POINTS` a frame, so the search poses the frames.
+        let seq = bent_strip(&[480, 440, 640, 560]);
+        let opts = FitOptions {
+            quality: Quality::Fast,
+            iters: Some(40),
+            occlusion: Occlusion::On,
+            ..FitOptions::default()
+        };
+        let prep = prepare(&seq, &opts).unwrap();
+        assert_eq!(prep.order.order, vec![2, 3, 1, 0]);
+        assert_eq!(prep.data.frames32[0].len(), 640);
+        assert_eq!(prep.data.track_from, vec![0, 0, 0, 2]);
+        let r = run_candidate(&prep, 2, &opts, &mut |_| Control::Continue).unwrap();
+        assert_eq!(r.canonical, 2);
+        // Labels and model are back in input order: every frame's labels are the
+        // model's segmentation of that frame, with that frame's poses, and each
+        // frame's poses fit its own (differently bent) strip better than the other
+        // frames' poses do.
+        let maha = |model: &super::super::GaussianModel, j: usize, pts: &[glam::Vec3]| {
+            let gs = model.frame_gaussians(j);
+            pts.iter()
+                .map(|p| super::super::gaussians::argmin_maha(&gs, p.as_dvec3()).1)
+                .sum::<f64>()
+                / pts.len() as f64
+        };
+        for (k, f) in seq.frames.iter().enumerate() {
+            assert_eq!(r.labels[k], r.model.segment(k, &f.points), "frame {k}");
+            let own = maha(&r.model, k, &f.points);
+            for j in (0..4usize).filter(|&j| j.abs_diff(k) >= 2) {
+                let other = maha(&r.model, j, &f.points);
+                assert!(
+                    own < other,
+                    "frame {k}: own poses {own}, frame {j}'s {other}"
+                );
+            }
+        }
+        // Steps 2–3 take it as the canonical frame.
+        let out = crate::pipeline::finish(&seq, r, &|| 0.0, &mut |_| Control::Continue).unwrap();
+        let res = &out.result;
+        assert_eq!(res.canonical_frame, 2);
+        assert_eq!(res.points.as_ref().map(Vec::len), Some(640));
+        for p in 0..res.parts {
+            let d = res.pose(2, p).unwrap() - glam::DMat4::IDENTITY;
+            assert!(d.to_cols_array().iter().all(|v| v.abs() < 1e-9), "part {p}");
+        }
+        // Full input keeps frame 0 and time order.
+        let full = prepare(
+            &seq,
+            &FitOptions {
+                occlusion: Occlusion::Off,
+                ..opts
+            },
+        )
+        .unwrap();
+        assert_eq!(full.order, FrameOrder::identity(4));
+        assert_eq!(full.data.track_from, vec![0, 0, 1, 2]);
     }
 
     #[test]
