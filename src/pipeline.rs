@@ -348,7 +348,11 @@ pub fn finish(
     let sizes = seq.frames.iter().map(|f| f.points.len());
     let (fewest, most) = (sizes.clone().min().unwrap_or(0), sizes.max().unwrap_or(0));
     notes.push(if step1.occlusion_used {
-        format!("occlusion handling: on (partial/occluded losses; input frames of {fewest}–{most} points)")
+        format!(
+            "occlusion handling: on (partial/occluded losses; input frames of {fewest}–{most} points); \
+             the Gaussians were placed on frame {canonical} ({}, the one with the most points), the canonical frame",
+            seq.frames[canonical].name
+        )
     } else {
         "occlusion handling: off (full-surface losses)".to_string()
     });

@@ -679,23 +679,13 @@ mod size_rule_tests {
         // Frames of 900, 600 and 750 points (one camera each would see that much
         // more or less), all above a working size of 256: the working clouds have
         // equal counts, the input frames do not.
-        let frames = |sizes: &[usize]| Sequence {
-            frames: sizes
-                .iter()
-                .enumerate()
-                .map(|(k, &n)| Frame {
-                    name: format!("{k}.ply"),
-                    points: (0..n)
-                        .map(|i| {
-                            let a = i as f32 * 2.399_963;
-                            let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
-                            let r = (1.0 - z * z).max(0.0).sqrt();
-                            glam::Vec3::new(r * a.cos(), r * a.sin(), z)
-                        })
-                        .collect(),
-                    ..Default::default()
-                })
-                .collect(),
+        let frames = |sizes: &[usize]| {
+            frames_of(sizes, |_, i, n| {
+                let a = i as f32 * 2.399_963;
+                let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+                let r = (1.0 - z * z).max(0.0).sqrt();
+                glam::Vec3::new(r * a.cos(), r * a.sin(), z)
+            })
         };
         let opts = FitOptions {
             working_size: 256,
@@ -761,30 +751,7 @@ mod size_rule_tests {
     fn restarts_keep_the_lowest_chamfer_of_their_seeds() {
         // A bent strip moving over three frames (too few points for the pose search:
         // the plain gradient fit, quick).
-        let seq = Sequence {
-            frames: (0..3)
-                .map(|k| Frame {
-                    name: format!("{k}.ply"),
-                    points: (0..240)
-                        .map(|i| {
-                            let u = (i % 40) as f32 / 40.0;
-                            let v = (i / 40) as f32 * 0.02;
-                            let a = if u > 0.5 {
-                                (u - 0.5) * k as f32 * 0.8
-                            } else {
-                                0.0
-                            };
-                            glam::Vec3::new(
-                                u.min(0.5) + (u - 0.5).max(0.0) * a.cos(),
-                                v,
-                                (u - 0.5).max(0.0) * a.sin(),
-                            )
-                        })
-                        .collect(),
-                    ..Default::default()
-                })
-                .collect(),
-        };
+        let seq = bent_strip(&[240; 3]);
         let opts = FitOptions {
             quality: Quality::Fast,
             iters: Some(40),
@@ -839,30 +806,37 @@ mod size_rule_tests {
         assert_eq!(restart_seed(7, 0), 7);
     }
 
-    /// A strip of `n[k]` points bending about x = 0.5 by 0.8·k rad in frame k.
-    fn bent_strip(n: &[usize]) -> Sequence {
+    /// Frames of `n[k]` points, point i of frame k at `point(k, i, n[k])`.
+    fn frames_of(n: &[usize], point: impl Fn(usize, usize, usize) -> glam::Vec3) -> Sequence {
         Sequence {
             frames: n
                 .iter()
                 .enumerate()
                 .map(|(k, &n)| Frame {
                     name: format!("{k}.ply"),
-                    points: (0..n)
-                        .map(|i| {
-                            let u = (i % 40) as f32 / 40.0;
-                            let v = (i / 40) as f32 * 0.02;
-                            let a = if u > 0.5 { k as f32 * 0.8 } else { 0.0 };
-                            glam::Vec3::new(
-                                u.min(0.5) + (u - 0.5).max(0.0) * a.cos(),
-                                v,
-                                (u - 0.5).max(0.0) * a.sin(),
-                            )
-                        })
-                        .collect(),
+                    points: (0..n).map(|i| point(k, i, n)).collect(),
                     ..Default::default()
                 })
                 .collect(),
         }
+    }
+
+    /// A strip of `n[k]` points whose half beyond x = 0.5 curls up more in every frame.
+    fn bent_strip(n: &[usize]) -> Sequence {
+        frames_of(n, |k, i, _| {
+            let u = (i % 40) as f32 / 40.0;
+            let v = (i / 40) as f32 * 0.02;
+            let a = if u > 0.5 {
+                (u - 0.5) * k as f32 * 0.8
+            } else {
+                0.0
+            };
+            glam::Vec3::new(
+                u.min(0.5) + (u - 0.5).max(0.0) * a.cos(),
+                v,
+                (u - 0.5).max(0.0) * a.sin(),
+            )
+        })
     }
 
     #[test]
