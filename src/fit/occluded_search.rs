@@ -14,9 +14,10 @@
 //! to frame 0), so frames are posed in order and later frames see a fuller
 //! surface. Frame 0 here is Step 1's start frame (`start_frame`: on occluded input
 //! the frame with the most points), and each frame is posed from the one
-//! `Data::track_from` names, its neighbour in time towards the start. Candidates are the search's (rotations about the contact with the posed
-//! neighbour, the neighbour's motion, the previous frame's motion), refined by ICP
-//! from frame points to the template; explained points are claimed, so later
+//! `Data::track_from` names, its neighbour in time towards the start. Candidates
+//! are the search's (rotations about the contact with the posed neighbour, the
+//! neighbour's motion, the previous frame's motion), refined by ICP from frame
+//! points to the template; explained points are claimed, so later
 //! Gaussians only explain what is left. A Gaussian whose points are hidden in a
 //! frame keeps its previous motion, or moves with its neighbour.
 //!
@@ -283,8 +284,9 @@ pub fn search_poses_occluded(
     let mut scored: Vec<(f64, usize)> = Vec::new();
     for t in 1..kk {
         let mut free: Vec<DVec3> = data.frames[t].clone();
+        let from = data.track_from[t];
         for &j in &order {
-            let prev = rel[j][data.track_from[t]];
+            let prev = rel[j][from];
             let nb = nbrs[j].first().map(|&i| rel[i][t]);
             if groups[j].len() < 3 || free.len() < 3 {
                 rel[j][t] = nb.unwrap_or(prev);
@@ -337,7 +339,7 @@ pub fn search_poses_occluded(
             let back_prev = inverse(prev);
             let carried: Vec<(&Template, Motion)> = descendants[j]
                 .iter()
-                .map(|&d| (&tpl[d], compose(back_prev, rel[d][data.track_from[t]])))
+                .map(|&d| (&tpl[d], compose(back_prev, rel[d][from])))
                 .collect();
             let score = |mo: Motion| explained_with(&tpl[j], &carried, &free, mo);
             // Refine every candidate on all free points and score it.

@@ -169,26 +169,24 @@ pub fn prepare(seq: &Sequence, opts: &FitOptions) -> Result<Prepared> {
     for c in &mut clouds {
         norm.points_to_fit(c);
     }
+    // Input frame sizes, before downsampling.
+    let sizes: Vec<usize> = seq.frames.iter().map(|f| f.points.len()).collect();
     let occluded = match opts.occlusion {
         Occlusion::On => true,
         Occlusion::Off => false,
-        Occlusion::Auto => {
-            let sizes: Vec<usize> = seq.frames.iter().map(|f| f.points.len()).collect();
-            detect_occlusion(&sizes, &clouds)
-        }
+        Occlusion::Auto => detect_occlusion(&sizes, &clouds),
     };
     let mut sched = Schedule::preset(opts.quality, is_small(seq, opts.working_size));
     if let Some(it) = opts.iters {
         sched = sched.with_iters(it);
     }
-    let sizes: Vec<usize> = seq.frames.iter().map(|f| f.points.len()).collect();
     let order = if occluded {
         FrameOrder::from_start(sizes.len(), start_frame::most_points(&sizes))
     } else {
         FrameOrder::identity(sizes.len())
     };
-    let mut data = Data::new(order.permute(&clouds));
-    data.track_from = order.track_from.clone();
+    let mut data = Data::new(order.permute(clouds));
+    data.track_from = order.track_from();
     let flow = (USE_FLOW && !occluded)
         .then(|| FlowField::compute(&data, &OtFlow::default(), 256, opts.seed));
     Ok(Prepared {

@@ -29,9 +29,6 @@ pub fn most_points(sizes: &[usize]) -> usize {
 pub struct FrameOrder {
     /// `order[i]`: the input frame at position i (position 0 is the start frame).
     pub order: Vec<usize>,
-    /// `track_from[i]`: the position whose poses position i is searched from (an
-    /// earlier position; 0 for position 0).
-    pub track_from: Vec<usize>,
 }
 
 impl FrameOrder {
@@ -39,7 +36,6 @@ impl FrameOrder {
     pub fn identity(k: usize) -> Self {
         FrameOrder {
             order: (0..k).collect(),
-            track_from: (0..k).map(|i| i.saturating_sub(1)).collect(),
         }
     }
 
@@ -51,20 +47,27 @@ impl FrameOrder {
             return Self::identity(0);
         }
         let s = start.min(k - 1);
-        let order: Vec<usize> = (s..k).chain((0..s).rev()).collect();
-        let mut pos = vec![0; k];
-        for (i, &t) in order.iter().enumerate() {
+        FrameOrder {
+            order: (s..k).chain((0..s).rev()).collect(),
+        }
+    }
+
+    /// Per position, the position whose poses it is searched from: its neighbour in
+    /// time towards the start (an earlier position; 0 for position 0).
+    pub fn track_from(&self) -> Vec<usize> {
+        let s = self.start();
+        let mut pos = vec![0; self.order.len()];
+        for (i, &t) in self.order.iter().enumerate() {
             pos[t] = i;
         }
-        let track_from = order
+        self.order
             .iter()
             .map(|&t| match t.cmp(&s) {
                 std::cmp::Ordering::Greater => pos[t - 1],
                 std::cmp::Ordering::Less => pos[t + 1],
                 std::cmp::Ordering::Equal => 0,
             })
-            .collect();
-        FrameOrder { order, track_from }
+            .collect()
     }
 
     /// The input frame Step 1 starts from.
@@ -73,8 +76,12 @@ impl FrameOrder {
     }
 
     /// `items` (one per input frame) in visiting order.
-    pub fn permute<T: Clone>(&self, items: &[T]) -> Vec<T> {
-        self.order.iter().map(|&t| items[t].clone()).collect()
+    pub fn permute<T>(&self, items: Vec<T>) -> Vec<T> {
+        let mut slots: Vec<Option<T>> = items.into_iter().map(Some).collect();
+        self.order
+            .iter()
+            .filter_map(|&t| slots.get_mut(t).and_then(Option::take))
+            .collect()
     }
 
     /// `items` in visiting order (one per position) back in input order.
@@ -103,9 +110,9 @@ mod tests {
         let o = FrameOrder::from_start(5, 2);
         assert_eq!(o.order, vec![2, 3, 4, 1, 0]);
         // 3 from 2 (position 0), 4 from 3, 1 from 2, 0 from 1.
-        assert_eq!(o.track_from, vec![0, 0, 1, 0, 3]);
+        assert_eq!(o.track_from(), vec![0, 0, 1, 0, 3]);
         assert_eq!(o.start(), 2);
-        for (i, &f) in o.track_from.iter().enumerate().skip(1) {
+        for (i, &f) in o.track_from().iter().enumerate().skip(1) {
             assert!(f < i, "position {i} tracked from a later one");
             assert_eq!(o.order[i].abs_diff(o.order[f]), 1);
         }
@@ -117,7 +124,7 @@ mod tests {
     fn permuting_and_back_is_the_identity() {
         let o = FrameOrder::from_start(6, 4);
         let items: Vec<String> = (0..6).map(|t| format!("f{t}")).collect();
-        let p = o.permute(&items);
+        let p = o.permute(items.clone());
         assert_eq!(p[0], "f4");
         assert_eq!(o.unpermute(p), items);
     }
