@@ -256,7 +256,10 @@ pub fn finish(
     norm.result_to_input(&mut result);
 
     // Every input point gets a part: segment the full frames with the Gaussians, then
-    // map Gaussians to merged parts.
+    // map Gaussians to merged parts. On occluded input the frames other than the
+    // canonical one are segmented by Step 1's `segmenter` (`select::SEGMENT_ITERS`):
+    // the canonical frame's labels decide which pose moves each of its points, so
+    // they stay those of the posed model.
     let part_of = |g: u32| kin.merge_map.get(g as usize).copied().unwrap_or(0);
     result.labels = seq
         .frames
@@ -264,7 +267,10 @@ pub fn finish(
         .enumerate()
         .map(|(t, f)| {
             step1
-                .model
+                .segmenter
+                .as_ref()
+                .filter(|_| t != canonical)
+                .unwrap_or(&step1.model)
                 .segment(t, &f.points)
                 .into_iter()
                 .map(part_of)
