@@ -725,7 +725,24 @@ pub fn fit_candidate_segmented(
         }
     }
     adam.reset();
-    let main_lr = search.map_or(sched.lr, |o| o.main_lr);
+    // On occluded input the main loop after the search (its 100 or 300 polishing
+    // iterations) runs at the preset's learning rate (2e-3) with the Chamfer only, not at
+    // the search's `PoseSearchOpts::main_lr` (1e-4) with the EMD after a third. The
+    // occluded search leaves poses much further off than the full-input one (mean pose
+    // error 10.3 against 0.8 with Gaussians on the true parts), which a polish at 1e-4
+    // barely moves. Measured with the segmenting copy
+    // (`select::SEGMENT_ITERS`), bench-dev occluded RI / recon / flow / TED /
+    // re-animation: fast, seeds 0–4, 0.755 / 7.43 / 8.19 / 4.83 / 6.16 → 0.778 / 7.28 /
+    // 7.89 / 4.54 / 5.57; balanced, seeds 0–2, 0.783 / 6.60 / 7.05 / 4.19 / 5.29 → 0.795 /
+    // 6.61 / 7.24 / 3.95 / 4.86; procedural occluded (five objects, generator seeds 0–3,
+    // fast) 0.695 / 8.55 / 6.48 / 4.90 / 4.45 → 0.720 / 7.68 / 5.51 / 4.30 / 4.19. With the
+    // EMD switch kept: fast 0.777 / 7.07 / 7.90 / 4.31 / 5.44, balanced 0.788 / 7.15 /
+    // 7.70 / 4.43 / 4.97.
+    let occluded_polish = cfg.occlusion && search.is_some();
+    let main_lr = match search {
+        Some(o) if !occluded_polish => o.main_lr,
+        _ => sched.lr,
+    };
     adam.lr = main_lr;
     let mut emd_cache: Vec<Option<EmdPair>> = vec![None; if cfg.occlusion { kk } else { kk * kk }];
     let mut plan = PlanB {
@@ -766,7 +783,7 @@ pub fn fit_candidate_segmented(
         let use_emd = if it >= sched.iters {
             it - sched.iters >= segment_emd
         } else {
-            it >= sched.emd_start
+            it >= sched.emd_start && !occluded_polish
         } && cfg.weights.emd > 0.0;
         plan.k = k;
         plan.use_cd = !use_emd && cfg.weights.cd > 0.0;

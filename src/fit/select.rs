@@ -279,7 +279,8 @@ pub const OCCLUDED_SEARCH_MIN_POINTS: usize = 400;
 /// The polished Gaussians move rigidly with their search poses, so in a frame that
 /// shows another side of a part they sit where the part is, not on its visible
 /// points, and those points go to a neighbour; the copy follows each frame's points.
-/// Measured (bench-dev occluded, mean RI, the other metrics unchanged): fast, seeds
+/// Measured (bench-dev occluded, mean RI, the other metrics unchanged; with the
+/// polish then at 1e-4, see `fitter`'s occluded polish): fast, seeds
 /// 0–4, 0.718 → 0.755 (every robot higher); balanced, seeds 0–2, 0.752 → 0.783 (five
 /// robots higher, panda_gripper 0.793 → 0.789, so101 0.784 → 0.761); partial, fast,
 /// seeds 0–1, 0.749 → 0.789. Length: fast, seeds 0–2, 500 / 1100 / 2000 iterations
