@@ -412,12 +412,11 @@ fn fit_once(
     #[cfg(target_arch = "wasm32")]
     let secs = 0.0;
     let mut result = candidate_result(prep, &params, chamfer, m, stats.iterations, secs);
+    // Only occluded input has a segmenter: held still as the posed Gaussians are, by
+    // its own motion.
     if let Some(mut seg) = segmenter {
-        // Held still as the posed Gaussians are, by its own motion.
-        if prep.occluded {
-            hold_still::hold_still(&prep.data, &mut seg);
-        }
-        result.segmenter = Some(input_model(prep, &seg));
+        hold_still::hold_still(&prep.data, &mut seg);
+        result.segmenter = Some(to_input(prep, seg.to_model()));
     }
     Ok(Step1Result {
         held_still: held,
@@ -447,7 +446,7 @@ pub fn candidate_result(
             .map(|(k, f)| fitted.segment(k, f))
             .collect(),
     );
-    let model = input_model(prep, params);
+    let model = to_input(prep, fitted);
     Step1Result {
         model,
         norm: prep.norm,
@@ -469,9 +468,8 @@ pub fn candidate_result(
     }
 }
 
-/// The model of `params` in input frame order and input units.
-fn input_model(prep: &Prepared, params: &super::gaussians::Params) -> super::GaussianModel {
-    let mut model = params.to_model();
+/// A model fitted on `prep`, put in input frame order and input units.
+fn to_input(prep: &Prepared, mut model: super::GaussianModel) -> super::GaussianModel {
     unpermute_model(&mut model, &prep.order);
     prep.norm.model_to_input(&mut model);
     model
