@@ -6,8 +6,8 @@
 //! The other procedural objects (cabinet, arm, hand, quadruped) do not meet this yet;
 //! the README's accuracy section lists where each stands. The cabinet is held to what
 //! it reaches now (three of its four parts, two joints of the right type), and so is
-//! the quadruped for generator seed 0 (its tree exact, six of its eight hinge axes
-//! within 5°, all within 15°).
+//! the quadruped for generator seed 0 (its tree exact, six of its eight hinges within
+//! 5° and a pivot error of 2, all axes within 15°).
 
 use gsart::eval::Metrics;
 use gsart::pipeline::{evaluate, fit, Control, FitOptions, Quality};
@@ -209,7 +209,9 @@ fn cabinet_comes_apart_into_its_moving_parts() {
 /// true axes. Its legs are capsules, which Step 1 leaves turned about their own long
 /// axes, and over their short swings (the hind-left thigh: 35° at most) that turn mixed
 /// into the hinge axes (up to 64° off) until the repair preferred the hinge that carries
-/// a leg's axis about a great circle (`flips::great_circle_hinge`).
+/// a leg's axis about a great circle (`flips::great_circle_hinge`). Six of the eight
+/// hinges meet the bar (axis ≤ 5°, pivot ≤ 2) since the refinement samples 2048
+/// points a frame (four with 1024: pivots 4.1 and 2.6, axes 5.6° and 10.3°).
 #[test]
 fn quadruped_legs_hinge_about_their_true_axes() {
     let (parts, m) = fit_and_evaluate(ObjectKind::Quadruped, 0);
@@ -221,8 +223,16 @@ fn quadruped_legs_hinge_about_their_true_axes() {
     );
     assert_eq!(m.tree_edit_distance, Some(0), "{m:?}");
     assert_eq!((j.found, j.type_correct), (8, 8), "{j:?}");
-    let within = axes.iter().filter(|&&a| a <= 5.0).count();
-    assert!(within >= 6, "{within} of the 8 axes within 5°: {axes:.1?}");
+    let pivots: Vec<Option<f64>> = j.per_joint.iter().map(|x| x.pivot_error).collect();
+    let in_bar = j
+        .per_joint
+        .iter()
+        .filter(|x| x.axis_deg.is_some_and(|a| a <= 5.0) && x.pivot_error.is_some_and(|p| p <= 2.0))
+        .count();
+    assert!(
+        in_bar >= 6,
+        "{in_bar} of the 8 hinges within 5° and a pivot error of 2: axes {axes:.1?}, pivots {pivots:.1?}"
+    );
     assert!(axes.iter().all(|&a| a <= 15.0), "{axes:.1?}");
 }
 
