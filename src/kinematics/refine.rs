@@ -27,8 +27,7 @@
 //! settle instead of jittering at the step size, plus a small prior that keeps revolute
 //! axes near their projection where the data do not see them (see `axis_prior`).
 //!
-//! Sample size: whole frames up to 2048 points, else 2048 points per frame; 200
-//! iterations. The Chamfer's sampling noise hides small errors: on the procedural
+//! Sample size: 2048 points per frame (smaller frames whole); 200 iterations. The Chamfer's sampling noise hides small errors: on the procedural
 //! laptop (2048-point frames) 384 points left a 2 % pivot error (refinement rejected;
 //! axis 2.7°, pivot 2.1 %), 1024 points 2.3 % (seed 3), the whole frames 0.7° / 0.5 %
 //! (loss identical at 200 and 500 iterations). Session 30, 4096-point frames, end to
