@@ -523,37 +523,48 @@ pub fn select(
     opts: &FitOptions,
     cb: &(dyn Fn(&Progress) -> Control + Sync),
 ) -> Result<Step1Result> {
+    select_all(seq, opts, cb)?
+        .into_iter()
+        .next()
+        .ok_or_else(|| Error::InvalidArgument("no candidate part count".into()))
+}
+
+/// Every candidate m, fitted, ordered by final Chamfer (lowest first; ties: smaller m).
+/// Each carries the whole candidate list and the timings of all of them.
+pub fn select_all(
+    seq: &Sequence,
+    opts: &FitOptions,
+    cb: &(dyn Fn(&Progress) -> Control + Sync),
+) -> Result<Vec<Step1Result>> {
     #[cfg(not(target_arch = "wasm32"))]
     let t0 = std::time::Instant::now();
     let ms = candidates(seq, opts)?;
     let prep = prepare(seq, opts)?;
-    let results = run_all(&prep, &ms, opts, cb);
-    let mut best: Option<Step1Result> = None;
-    let mut cands = Vec::new();
-    let mut per = Vec::new();
-    for r in results {
-        let r = r?;
-        cands.push((r.m, r.final_chamfer));
-        per.extend(r.timings.per_candidate.iter().copied());
-        let better = match &best {
-            None => true,
-            Some(b) => r.final_chamfer < b.final_chamfer,
-        };
-        if better {
-            best = Some(r);
-        }
+    let mut results = run_all(&prep, &ms, opts, cb)
+        .into_iter()
+        .collect::<Result<Vec<Step1Result>>>()?;
+    if results.is_empty() {
+        return Err(Error::InvalidArgument("no candidate part count".into()));
     }
-    let mut best = best.ok_or_else(|| Error::InvalidArgument("no candidate part count".into()))?;
-    best.candidates = cands;
+    let cands: Vec<(usize, f64)> = results.iter().map(|r| (r.m, r.final_chamfer)).collect();
+    let per: Vec<(usize, f64, usize)> = results
+        .iter()
+        .flat_map(|r| r.timings.per_candidate.iter().copied())
+        .collect();
+    // Stable: equal Chamfers keep the candidate order (smaller m first).
+    results.sort_by(|a, b| a.final_chamfer.total_cmp(&b.final_chamfer));
     #[cfg(not(target_arch = "wasm32"))]
     let total = t0.elapsed().as_secs_f64();
     #[cfg(target_arch = "wasm32")]
     let total = 0.0;
-    best.timings = Timings {
-        total_s: total,
-        per_candidate: per,
-    };
-    Ok(best)
+    for r in &mut results {
+        r.candidates = cands.clone();
+        r.timings = Timings {
+            total_s: total,
+            per_candidate: per.clone(),
+        };
+    }
+    Ok(results)
 }
 
 #[cfg(target_arch = "wasm32")]

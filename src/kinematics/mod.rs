@@ -3,6 +3,7 @@
 
 pub mod build;
 pub mod chain;
+pub mod coverage;
 pub mod flips;
 pub mod joint_sweep;
 pub mod merge;

@@ -263,6 +263,27 @@ pub fn finish(
     Ok(out.result.to_json())
 }
 
+/// The core's second look (`pipeline::second_look`) at two finished fits, the best
+/// candidate's and the runner-up's result JSON: `{runner, result}`, where `runner` says
+/// whether the runner-up was kept and `result` is the kept result's JSON with the look
+/// recorded in its info and notes (the best's unchanged when the look cannot be made).
+#[wasm_bindgen]
+pub fn second_look(best_json: &str, runner_json: &str) -> Result<JsValue, JsError> {
+    let best = FitResult::from_json(best_json, "best candidate's result").map_err(js_err)?;
+    let runner = FitResult::from_json(runner_json, "runner-up's result").map_err(js_err)?;
+    let o = Object::new();
+    let Some(look) = crate::pipeline::second_look(&best, &runner) else {
+        set(&o, "runner", &JsValue::FALSE);
+        set(&o, "result", &JsValue::from_str(best_json));
+        return Ok(o.into());
+    };
+    let mut kept = if look.take_runner { runner } else { best };
+    crate::pipeline::record_second_look(&mut kept, &look);
+    set(&o, "runner", &JsValue::from_bool(look.take_runner));
+    set(&o, "result", &JsValue::from_str(&kept.to_json()));
+    Ok(o.into())
+}
+
 /// The candidate the core's rule selects among `(m, loss)` pairs (lowest final
 /// Chamfer, ties to the smaller m), so the page knows which worker goes on.
 #[wasm_bindgen]

@@ -111,6 +111,13 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   assert.equal(json.version, 1);
   assert.equal(json.frames, json.labels.length);
   assert.equal(json.info.restarts, 2, 'each part count was fitted twice');
+  // Both ends were finished and the second look kept one of them (the page runs the
+  // core's rule on the two finished results).
+  const look = json.info.second_look;
+  assert.ok(look && [2, 4].includes(look.taken), `second look: ${JSON.stringify(look)}`);
+  assert.equal(look.taken, json.info.m, 'the kept result is the candidate the look took');
+  assert.ok(json.info.notes.some((n) => /^second look/.test(n)), 'the notes say what was compared');
+  assert.match(await page.locator('#result-summary').innerText(), new RegExp(`chosen m = ${look.taken} Gaussians`));
   assert.ok(Array.isArray(json.joints) && json.joints.length >= 1);
   assert.ok(Array.isArray(json.points), 'the export carries the canonical points');
   const zipFile = await download(page, '#btn-export-ply');

@@ -592,6 +592,7 @@ async function startFit() {
     gt: gtOk ? S.gt : null,
     labels: gtOk ? good.map((f) => f.labels) : null,
     bestOf: (ms, losses) => wasm.best_candidate(Uint32Array.from(ms), Float64Array.from(losses)),
+    secondLook: (best, runner) => wasm.second_look(best, runner),
     callbacks: {
       onCandidateStart: (m) => {
         cands.set(m, { iter: 0, total: totalGuess, done: false });

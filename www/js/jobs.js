@@ -84,10 +84,11 @@ export function maxParallel() {
  * Runs a whole fit. Callbacks:
  *   onCandidateStart(m), onWorking(m, frames), onCandidateProgress(m, msg),
  *   onCandidateDone(m, {loss, ms}), onFinishProgress(msg)
- * Resolves with {result, metrics, metricsError, candidates: [{m, loss, ms}], best}.
+ * Resolves with {result, metrics, metricsError, candidates: [{m, loss, ms}], best}
+ * (`best`: the kept candidate, the runner-up when the second look took it).
  */
 export class FitJob {
-  constructor({ frames, names, options, parts, gt, labels, bestOf, callbacks }) {
+  constructor({ frames, names, options, parts, gt, labels, bestOf, secondLook, callbacks }) {
     this.frames = frames;
     this.names = names;
     this.options = options;
@@ -95,6 +96,7 @@ export class FitJob {
     this.gt = gt;
     this.labels = labels;
     this.bestOf = bestOf;
+    this.secondLook = secondLook;
     this.cb = callbacks;
     this.lanes = [];
     this.cancelled = false;
@@ -105,6 +107,7 @@ export class FitJob {
     const queue = [...this.ms];
     const done = [];
     const owner = new Map(); // m -> lane holding its candidate
+    let occluded = false;
     const runLane = async (lane) => {
       while (queue.length && !this.cancelled) {
         const m = queue.shift();
@@ -119,6 +122,7 @@ export class FitJob {
           },
         );
         done.push({ m, loss: r.loss, ms: r.ms });
+        occluded = occluded || r.occlusionUsed;
         owner.set(m, lane);
         this.cb.onCandidateDone?.(m, { loss: r.loss, ms: r.ms });
       }
@@ -129,20 +133,41 @@ export class FitJob {
       if (this.cancelled) throw new CancelledError();
       done.sort((a, b) => a.m - b.m);
       const best = this.bestOf(done.map((c) => c.m), done.map((c) => c.loss));
-      const lane = owner.get(best);
-      for (const l of this.lanes) if (l !== lane) l.terminate();
-      const { arrays, transfer } = copies(this.frames);
-      const r = await lane.run(
-        {
-          type: 'finish', m: best, frames: arrays, names: this.names, options: this.options,
-          candidates: done.map((c) => [c.m, c.loss]), gt: this.gt ?? null, labels: this.gt ? this.labels : null,
-        },
-        transfer,
-        (msg) => { if (msg.type === 'progress') this.cb.onFinishProgress?.(msg); },
-      );
+      // The runner-up gets its own Steps 2–3 too (full input; the core's second look,
+      // `pipeline::second_look`, keeps it when the best leaves clearly more of the
+      // clouds unexplained). Both finish at once when two workers hold them.
+      const rest = done.filter((c) => c.m !== best);
+      const runner = rest.length > 0 && !occluded
+        ? this.bestOf(rest.map((c) => c.m), rest.map((c) => c.loss)) : null;
+      const keep = new Set([owner.get(best), runner === null ? null : owner.get(runner)]);
+      for (const l of this.lanes) if (!keep.has(l)) l.terminate();
+      const finishOn = (m, report) => {
+        const { arrays, transfer } = copies(this.frames);
+        return owner.get(m).run(
+          {
+            type: 'finish', m, frames: arrays, names: this.names, options: this.options,
+            candidates: done.map((c) => [c.m, c.loss]), gt: this.gt ?? null, labels: this.gt ? this.labels : null,
+          },
+          transfer,
+          (msg) => { if (report && msg.type === 'progress') this.cb.onFinishProgress?.(msg); },
+        );
+      };
+      const t0 = performance.now();
+      let r;
+      let kept = best;
+      if (runner === null) {
+        r = await finishOn(best, true);
+      } else {
+        const [a, b] = owner.get(best) === owner.get(runner)
+          ? [await finishOn(best, true), await finishOn(runner, false)]
+          : await Promise.all([finishOn(best, true), finishOn(runner, false)]);
+        const look = this.secondLook(a.result, b.result);
+        if (look.runner) kept = runner;
+        r = { ...(look.runner ? b : a), result: look.result };
+      }
       return {
         result: r.result, metrics: r.metrics, metricsError: r.metricsError,
-        candidates: done, best, finishMs: r.ms,
+        candidates: done, best: kept, finishMs: performance.now() - t0,
       };
     } finally {
       for (const l of this.lanes) l.terminate();
