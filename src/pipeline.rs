@@ -214,7 +214,12 @@ pub fn fit(
             .unwrap_or_else(|_| Err(crate::Error::InvalidArgument("Steps 2–3 panicked".into())));
         (first, second)
     });
-    Ok(keep_after_second_look(first?, second?))
+    match (first?, second) {
+        (first, Ok(second)) => Ok(keep_after_second_look(first, second)),
+        (_, Err(crate::Error::Cancelled)) => Err(crate::Error::Cancelled),
+        // The runner-up failing leaves the best as it is.
+        (first, Err(_)) => Ok(first),
+    }
 }
 
 /// How much the best candidate must leave unexplained, relative to the runner-up, for

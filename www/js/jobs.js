@@ -158,10 +158,15 @@ export class FitJob {
       if (runner === null) {
         r = await finishOn(best, true);
       } else {
+        // The runner-up failing leaves the best as it is (a cancel still cancels).
+        const second = () => finishOn(runner, false).catch((e) => {
+          if (e instanceof CancelledError || this.cancelled) throw e;
+          return null;
+        });
         const [a, b] = owner.get(best) === owner.get(runner)
-          ? [await finishOn(best, true), await finishOn(runner, false)]
-          : await Promise.all([finishOn(best, true), finishOn(runner, false)]);
-        const look = this.secondLook(a.result, b.result);
+          ? [await finishOn(best, true), await second()]
+          : await Promise.all([finishOn(best, true), second()]);
+        const look = b ? this.secondLook(a.result, b.result) : { runner: false, result: a.result };
         if (look.runner) kept = runner;
         r = { ...(look.runner ? b : a), result: look.result };
       }
