@@ -301,11 +301,13 @@ fn keep_after_second_look(best: FitOutput, runner: FitOutput) -> FitOutput {
     kept
 }
 
-/// Steps 2–3 on the selected Step-1 candidate, and the complete result: labels for every
-/// input point (frames larger than the working size are segmented in full by the
-/// Gaussians), Gaussians, tree, joints, root motion and the canonical frame's points.
-/// The browser calls this after its per-candidate workers finished (pick the candidate
-/// with [`select_candidate`]). `clock` returns seconds (any origin).
+/// Steps 2–3 on a Step-1 candidate, and the complete result: labels for every input
+/// point (frames larger than the working size are segmented in full by the Gaussians),
+/// Gaussians, tree, joints, root motion, the canonical frame's points and, on full
+/// input, the share of points the model leaves unexplained (`info.unexplained`). The
+/// browser calls this after its per-candidate workers finished, on the best candidate
+/// ([`select_candidate`]) and on full input also on the runner-up, then keeps one by
+/// [`second_look`]. `clock` returns seconds (any origin).
 pub fn finish(
     seq: &crate::io::sequence::Sequence,
     step1: crate::fit::Step1Result,
