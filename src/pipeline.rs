@@ -183,9 +183,9 @@ pub fn fit(
     let Some(runner) = ranked.next().filter(|_| !best.occlusion_used) else {
         return finish(seq, best, &clock, &mut |p| cb(p));
     };
-    drop(ranked);
-    // Progress comes from the best's Steps 2–3, then from the runner-up's if it is still
-    // running; a cancel stops both.
+    drop(ranked); // the other candidates' models are not needed any more
+                  // Progress comes from the best's Steps 2–3, then from the runner-up's if it is still
+                  // running; a cancel stops both.
     use std::sync::atomic::{AtomicBool, Ordering};
     let (cancelled, first_done) = (AtomicBool::new(false), AtomicBool::new(false));
     let report = |p: &Progress| {
@@ -412,6 +412,11 @@ pub fn finish(
         (0, None)
     } else {
         let clouds: Vec<&[glam::Vec3]> = seq.frames.iter().map(|f| f.points.as_slice()).collect();
+        // One index per frame, for the relabelling and the coverage measure.
+        let grids: Vec<crate::geom::knn::Grid> = clouds
+            .iter()
+            .map(|c| crate::geom::knn::Grid::new(c))
+            .collect();
         let poses: Vec<Vec<glam::DMat4>> = (0..k)
             .map(|t| {
                 (0..result.parts)
@@ -421,6 +426,7 @@ pub fn finish(
             .collect();
         let changed = crate::kinematics::relabel::relabel(
             &clouds,
+            &grids,
             &mut result.labels,
             &poses,
             norm.scale,
@@ -432,7 +438,8 @@ pub fn finish(
             .labels
             .get(canonical)
             .map_or(&[][..], |l| l.as_slice());
-        let share = crate::kinematics::coverage::unexplained(&clouds, canonical, labels, &poses);
+        let share =
+            crate::kinematics::coverage::unexplained(&clouds, &grids, canonical, labels, &poses);
         (changed, Some((share, clock() - t)))
     };
     let coverage_s = unexplained.map_or(0.0, |u| u.1);
@@ -743,10 +750,14 @@ mod tests {
             .iter()
             .map(|f| f.points.as_slice())
             .collect();
+        let grids: Vec<crate::geom::knn::Grid> = clouds
+            .iter()
+            .map(|c| crate::geom::knn::Grid::new(c))
+            .collect();
         let mut poses: Vec<Vec<glam::DMat4>> = (0..r.frames)
             .map(|t| (0..r.parts).map(|p| r.pose(t, p).expect("pose")).collect())
             .collect();
-        let u = crate::kinematics::coverage::unexplained(&clouds, 0, &r.labels[0], &poses);
+        let u = crate::kinematics::coverage::unexplained(&clouds, &grids, 0, &r.labels[0], &poses);
         assert!(u < 0.01, "true model: {u}");
         // The laptop's two parts: the lid follows the base.
         assert_eq!(r.parts, 2);
@@ -754,7 +765,8 @@ mod tests {
         for f in &mut poses {
             f[1 - base] = f[base];
         }
-        let stuck = crate::kinematics::coverage::unexplained(&clouds, 0, &r.labels[0], &poses);
+        let stuck =
+            crate::kinematics::coverage::unexplained(&clouds, &grids, 0, &r.labels[0], &poses);
         assert!(
             stuck > 0.05 && stuck > 10.0 * u,
             "stuck lid: {stuck} against {u}"

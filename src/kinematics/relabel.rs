@@ -35,10 +35,12 @@ impl Default for RelabelOpts {
 
 /// Relabels every frame's points (`labels[k][i]` for `clouds[k][i]`) by the part
 /// whose motion (`poses[t][p]`, frame t's pose of part p) best carries the point
-/// onto the clouds of the other frames. `size` is the object's size in the clouds'
-/// units. Returns the number of changed labels.
+/// onto the clouds of the other frames. `grids[k]` indexes `clouds[k]` (built once by
+/// the caller, which measures the coverage on them too). `size` is the object's size in
+/// the clouds' units. Returns the number of changed labels.
 pub fn relabel(
     clouds: &[&[Vec3]],
+    grids: &[Grid],
     labels: &mut [Vec<u32>],
     poses: &[Vec<DMat4>],
     size: f64,
@@ -46,10 +48,9 @@ pub fn relabel(
 ) -> usize {
     let kk = clouds.len();
     let parts = poses.first().map_or(0, Vec::len);
-    if kk < 2 || parts < 2 || labels.len() != kk {
+    if kk < 2 || parts < 2 || labels.len() != kk || grids.len() != kk {
         return 0;
     }
-    let grids: Vec<Grid> = clouds.iter().map(|c| Grid::new(c)).collect();
     let cap2 = (opts.cap * size * size) as f32;
     let mut changed = 0;
     for k in 0..kk {
@@ -137,8 +138,10 @@ mod tests {
             *l = 0;
         }
         let poses = vec![vec![DMat4::IDENTITY; 2], vec![DMat4::IDENTITY, turn]];
+        let grids = [Grid::new(&cloud), Grid::new(&moved)];
         let n = relabel(
             &[cloud.as_slice(), moved.as_slice()],
+            &grids,
             &mut labels,
             &poses,
             2.0,
