@@ -42,9 +42,9 @@ mod cli {
             /// Step-1 iterations per candidate (overrides the quality preset).
             #[arg(long)]
             iters: Option<usize>,
-            /// Quality preset: fast (the two ends of the part range, two motion
-            /// re-segmentation rounds with a lighter pose search after them, a short
-            /// polish), balanced (every part count, three rounds) or paper (the paper's
+            /// Quality preset: fast (the two ends of the part range, every part count
+            /// on occluded input; two motion re-segmentation rounds with a lighter
+            /// pose search after them, a short polish), balanced (every part count, three rounds) or paper (the paper's
             /// iteration counts).
             #[arg(long, default_value = "balanced")]
             quality: String,

@@ -169,13 +169,23 @@ pub fn default_part_range(frames: Array, names: Array) -> Result<Vec<u32>, JsErr
     Ok(vec![lo as u32, hi as u32])
 }
 
-/// The part counts a fit with these options tries in `lo..=hi` (the core's rule:
-/// fast thins the list, see `fit::select::candidate_parts`).
+/// The part counts a fit of these frames with these options tries in `lo..=hi` (the
+/// core's rule: fast thins the list on full input, see
+/// `fit::select::candidate_parts`).
 #[wasm_bindgen]
-pub fn candidate_parts(lo: u32, hi: u32, options: JsValue) -> Result<Vec<u32>, JsError> {
-    let opts = options_from_js(options)?;
-    let ms = crate::fit::select::candidate_parts(lo as usize, hi as usize, opts.quality)
-        .map_err(js_err)?;
+pub fn candidate_parts(
+    frames: Array,
+    names: Array,
+    lo: u32,
+    hi: u32,
+    options: JsValue,
+) -> Result<Vec<u32>, JsError> {
+    let seq = sequence_from_js(&frames, &names)?;
+    let opts = FitOptions {
+        parts: Some((lo as usize, hi as usize)),
+        ..options_from_js(options)?
+    };
+    let ms = crate::fit::select::candidates(&seq, &opts).map_err(js_err)?;
     Ok(ms.into_iter().map(|m| m as u32).collect())
 }
 

@@ -1,12 +1,13 @@
 // The whole product flow on a built-in example with the fast preset: fit (progress,
 // live Gaussians), results (tree, joints, metrics), a slider re-poses the model,
 // exports (JSON, PLY zip, URDF), and the exported JSON opens again (file and ?model=URL).
-// Also: cancelling a fit leaves the page usable with the frames loaded.
+// Also: cancelling a fit leaves the page usable with the frames loaded, and fast tries
+// every part count on occluded frames (the core's rule).
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import fs from 'node:fs';
 import path from 'node:path';
-import { startServer, launch, newPage, waitLoaded, canvasStats, canvasPng, pixelDiff, shot, ARTIFACTS } from './helpers.mjs';
+import { startServer, launch, newPage, waitLoaded, canvasStats, canvasPng, pixelDiff, shot, ARTIFACTS, benchDev } from './helpers.mjs';
 
 let srv, browser;
 before(async () => { srv = await startServer(); browser = await launch(); });
@@ -194,6 +195,35 @@ test('cancelling a fit keeps the page usable with the frames loaded', { timeout:
   assert.ok((await canvasStats(page)).lit > 500, 'the frames are still drawn');
   await page.keyboard.press('ArrowRight');
   assert.equal((await page.locator('#frame-label').innerText()).trim().split(' ')[0], '2');
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
+const OCCLUDED = benchDev() && path.join(benchDev(), 'occluded', 'so101_00');
+
+test('fast tries every part count on occluded frames, the two ends on full ones', { timeout: 180_000, skip: !OCCLUDED && 'bench-dev not found' }, async () => {
+  const { page, errors, context } = await newPage(browser);
+  await page.goto(`${srv.base}/`);
+  await waitLoaded(page);
+  await page.locator('label:has(input[value=fast])').click();
+  const tried = async () => {
+    await page.locator('#btn-fit').click();
+    await page.waitForFunction(() => /^Trying/.test(document.querySelector('#fit-status').innerText));
+    const text = await page.locator('#fit-status').innerText();
+    await page.locator('#btn-cancel').click();
+    await page.waitForFunction(() => /Cancelled/.test(document.querySelector('#fit-status').innerText));
+    return text;
+  };
+  // The occluded frames (one camera's view each: their point counts differ).
+  const files = fs.readdirSync(OCCLUDED).filter((f) => /^frame_\d+\.ply$/.test(f)).map((f) => path.join(OCCLUDED, f));
+  await page.locator('#file-input').setInputFiles(files);
+  await page.waitForFunction((n) => document.querySelectorAll('#frame-list li[data-index]').length === n, files.length);
+  assert.match(await tried(), /Trying m = 10…15 Gaussians \(\d+ in parallel\), fast quality/);
+  // The same robot's full frames: the two ends only.
+  await page.locator('#file-input').setInputFiles(files.map((f) => f.replace(`${path.sep}occluded${path.sep}`, `${path.sep}full${path.sep}`)));
+  await page.waitForFunction((n) => document.querySelectorAll('#frame-list li[data-index]').length === n
+    && /4,096 pts/.test(document.querySelector('#frame-list li').innerText), files.length);
+  assert.match(await tried(), /Trying m = 10, 15 of 10…15 Gaussians \(\d+ in parallel\), fast quality/);
   assert.deepEqual(errors, []);
   await context.close();
 });

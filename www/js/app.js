@@ -543,8 +543,17 @@ async function startFit() {
   S.chart.clear('Step 1 loss');
   fitUi(true);
   setStepActive('step-fit');
-  // The core decides which part counts a quality tries (fast: the two ends of the range).
-  const parts = Array.from(wasm.candidate_parts(range[0], range[1], opts));
+  // The core decides which part counts a quality tries (fast: the two ends of the
+  // range, unless the frames are fitted as occluded).
+  let parts;
+  try {
+    parts = Array.from(wasm.candidate_parts(good.map((f) => f.points), good.map((f) => f.name),
+      range[0], range[1], opts));
+  } catch (e) {
+    $('fit-status').innerHTML = `<span class="msg-error">${escapeHtml(errText(e))}</span>`;
+    fitUi(false);
+    return;
+  }
   const par = Math.min(maxParallel(), parts.length);
   const whole = parts.length === range[1] - range[0] + 1;
   const tried = range[0] === range[1] ? `m = ${range[0]}`
