@@ -44,8 +44,8 @@ mod cli {
             iters: Option<usize>,
             /// Quality preset: fast (the two ends of the part range, every part count
             /// on occluded input; two motion re-segmentation rounds with a lighter
-            /// pose search after them, a short polish), balanced (every part count, three rounds) or paper (the paper's
-            /// iteration counts).
+            /// pose search after them, a short polish), balanced (every part count,
+            /// three rounds) or paper (the paper's iteration counts).
             #[arg(long, default_value = "balanced")]
             quality: String,
             /// Occlusion handling: auto, on or off.
