@@ -92,14 +92,34 @@ pub fn trimmed_icp(
     keep: f64,
     dst: &mut Vec<DVec3>,
 ) -> (DMat3, DVec3) {
-    for _ in 0..rounds {
+    // Each point's match of the last round: after the first round the points move
+    // little, and the old match bounds the search (`Grid::nearest_hinted`).
+    let mut matched: Vec<u32> = Vec::new();
+    if grid.is_empty() {
+        return mo;
+    }
+    for round in 0..rounds {
         dst.clear();
-        for p in pts {
+        for (i, p) in pts.iter().enumerate() {
             let x = mo.0 * *p + mo.1;
-            dst.push(
-                grid.nearest(x.as_vec3())
-                    .map_or(x, |(j, _)| cloud(j as usize)),
-            );
+            let q = x.as_vec3();
+            let nn = if round == 0 {
+                grid.nearest(q)
+            } else {
+                let j = matched[i];
+                grid.nearest_hinted(q, (j, cloud(j as usize).as_vec3()))
+            };
+            match nn {
+                Some((j, _)) => {
+                    if round == 0 {
+                        matched.push(j);
+                    } else {
+                        matched[i] = j;
+                    }
+                    dst.push(cloud(j as usize));
+                }
+                None => return mo, // not reached: the grid is not empty
+            }
         }
         match kabsch_trimmed(pts, dst, keep) {
             Some(f) => mo = f,

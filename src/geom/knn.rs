@@ -170,6 +170,21 @@ impl Grid {
         Some(best)
     }
 
+    /// Nearest indexed point to `q`, given a `hint`: an indexed point (original index,
+    /// position) that is likely near it, such as the last answer for a query that has
+    /// since moved a little (an ICP round, an optimiser step). The search starts with
+    /// the hint's distance as the best so far, so it scans only the box within that
+    /// distance instead of growing shells from an empty home cell; the answer is the
+    /// same nearest point (on an exact tie the hint is kept).
+    pub fn nearest_hinted(&self, q: Vec3, hint: (u32, Vec3)) -> Option<(u32, f32)> {
+        if self.pts.is_empty() {
+            return None;
+        }
+        let mut best = (hint.0, hint.1.distance_squared(q));
+        self.search(q, &mut best);
+        Some(best)
+    }
+
     /// Nearest indexed point to `q` closer than `cap2` (squared), if any: (original
     /// index, squared distance). Like `nearest_d2_capped`, a query far from the
     /// cloud costs a few cell visits; `nearest` would grow shells until it finds one.
@@ -386,6 +401,42 @@ mod tests {
             // The capped nearest point: the uncapped one when it is within the cap.
             let near = g.nearest(q).filter(|&(_, d)| d < cap);
             assert_eq!(g.nearest_capped(q, cap), near, "{q:?}");
+        }
+    }
+
+    #[test]
+    fn hinted_query_matches_brute_force_from_any_hint() {
+        // Hints near the answer (the last answer of a query that moved a little) and
+        // far from it (a stale one): the answer is the nearest point either way.
+        let mut rng = rand::rngs::StdRng::seed_from_u64(17);
+        let pts: Vec<Vec3> = (0..2500)
+            .map(|_| {
+                let v = Vec3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                );
+                v.normalize_or_zero() * 0.5
+            })
+            .collect();
+        let g = Grid::new(&pts);
+        for k in 0..3000 {
+            let q = Vec3::new(
+                rng.random_range(-0.8..0.8),
+                rng.random_range(-0.8..0.8),
+                rng.random_range(-0.8..0.8),
+            );
+            let (_, d0) = g.nearest(q).unwrap();
+            let hint = if k % 2 == 0 {
+                let moved = q + Vec3::splat(0.01);
+                g.nearest(moved).unwrap().0
+            } else {
+                rng.random_range(0..pts.len() as u32)
+            };
+            let (j, d) = g.nearest_hinted(q, (hint, pts[hint as usize])).unwrap();
+            assert_eq!(d, brute(&pts, q), "{q:?}");
+            assert_eq!(d, d0);
+            assert_eq!(pts[j as usize].distance_squared(q), d);
         }
     }
 

@@ -208,7 +208,14 @@ fn left_jacobian(phi: DVec3) -> DMat3 {
 
 /// Bidirectional squared Chamfer (means) between `y` and `x`, with its gradient on `y`
 /// written into `g`. `xg` indexes `x`; `yg` is scratch, rebuilt on `y`.
-fn chamfer(y: &[Vec3], x: &[Vec3], xg: &Grid, yg: &mut Grid, g: &mut [Vec3]) -> f64 {
+fn chamfer(
+    y: &[Vec3],
+    x: &[Vec3],
+    xg: &Grid,
+    yg: &mut Grid,
+    g: &mut [Vec3],
+    mut hints: Option<&mut FrameHints>,
+) -> f64 {
     g.iter_mut().for_each(|v| *v = Vec3::ZERO);
     if y.is_empty() || x.is_empty() {
         return 0.0;
@@ -216,19 +223,70 @@ fn chamfer(y: &[Vec3], x: &[Vec3], xg: &Grid, yg: &mut Grid, g: &mut [Vec3]) -> 
     let (ny, nx) = (y.len() as f32, x.len() as f32);
     let mut loss = 0.0f64;
     for (i, yi) in y.iter().enumerate() {
-        if let Some((j, d)) = xg.nearest(*yi) {
+        let nn = match hints.as_deref_mut() {
+            Some(h) => h.to_target.nearest(xg, (i, y.len()), *yi, x),
+            None => xg.nearest(*yi),
+        };
+        if let Some((j, d)) = nn {
             loss += d as f64 / ny as f64;
             g[i] = (*yi - x[j as usize]) * (2.0 / ny);
         }
     }
     yg.rebuild(y);
-    for xm in x {
-        if let Some((i, d)) = yg.nearest(*xm) {
+    for (m, xm) in x.iter().enumerate() {
+        let nn = match hints.as_deref_mut() {
+            Some(h) => h.to_model.nearest(yg, (m, x.len()), *xm, y),
+            None => yg.nearest(*xm),
+        };
+        if let Some((i, d)) = nn {
             loss += d as f64 / nx as f64;
             g[i as usize] += (y[i as usize] - *xm) * (2.0 / nx);
         }
     }
     loss
+}
+
+/// Each query point's nearest point at the last evaluation, per frame: between two
+/// Adam steps the model's points move little, so the old match bounds the search
+/// (`Grid::nearest_hinted`; the same nearest points, measured faster).
+#[derive(Default)]
+pub(crate) struct Hints {
+    frames: Vec<FrameHints>,
+}
+
+#[derive(Default)]
+pub(crate) struct FrameHints {
+    /// Model point → target point.
+    to_target: Matches,
+    /// Target point → model point.
+    to_model: Matches,
+}
+
+/// `0[i]`: query i's last match (`u32::MAX`: none yet).
+#[derive(Default)]
+struct Matches(Vec<u32>);
+
+impl Matches {
+    /// Nearest point of `grid` (over `pts`) to query `i` of `n` at `q`, hinted by
+    /// query `i`'s last match; records the new one.
+    fn nearest(
+        &mut self,
+        grid: &Grid,
+        (i, n): (usize, usize),
+        q: Vec3,
+        pts: &[Vec3],
+    ) -> Option<(u32, f32)> {
+        if self.0.len() != n {
+            self.0.clear();
+            self.0.resize(n, u32::MAX);
+        }
+        let nn = match pts.get(self.0[i] as usize) {
+            Some(&p) => grid.nearest_hinted(q, (self.0[i], p)),
+            None => grid.nearest(q),
+        }?;
+        self.0[i] = nn.0;
+        Some(nn)
+    }
 }
 
 /// Sampled data of the refinement: source points (frame c) with parts, targets per frame.
@@ -289,7 +347,11 @@ pub(crate) fn loss_grad(
     d: &Data,
     matching: Option<&Matching>,
     grad: Option<&mut [f64]>,
+    mut hints: Option<&mut Hints>,
 ) -> f64 {
+    if let Some(h) = hints.as_deref_mut() {
+        h.frames.resize_with(m.k, FrameHints::default);
+    }
     let mut gbuf = vec![0.0; if grad.is_some() { m.len() } else { 0 }];
     let mut y = vec![Vec3::ZERO; d.src.len()];
     let mut g = vec![Vec3::ZERO; d.src.len()];
@@ -304,7 +366,8 @@ pub(crate) fn loss_grad(
         for (i, (s, &p)) in d.src.iter().zip(&d.src_part).enumerate() {
             y[i] = poses[p].transform_point3(*s).as_vec3();
         }
-        total += chamfer(&y, tgt, &d.grids[t], &mut ygrid, &mut g);
+        let fh = hints.as_deref_mut().map(|h| &mut h.frames[t]);
+        total += chamfer(&y, tgt, &d.grids[t], &mut ygrid, &mut g, fh);
         if let Some(mt) = matching {
             let cols = &mt.cols[t];
             let w = mt.lambda / cols.len().max(1) as f64;
@@ -532,7 +595,7 @@ pub fn refine(
     let use_emd = opts.lambda_emd > 0.0 && opts.emd_sample > 0;
     let eval_loss = |x: &[f64], lap: &mut Lap| {
         let mt = use_emd.then(|| assign(&m, x, eval, opts.emd_sample, opts.lambda_emd, lap));
-        loss_grad(&m, x, eval, mt.as_ref(), None)
+        loss_grad(&m, x, eval, mt.as_ref(), None, None)
     };
     let loss_before = eval_loss(&x0, &mut lap);
     let mut matching = None;
@@ -542,6 +605,7 @@ pub fn refine(
     let mut g = vec![0.0; x.len()];
     let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-8);
     let prior_w = opts.axis_prior * (m.k.saturating_sub(1)) as f64;
+    let mut hints = Hints::default();
     for it in 0..opts.iters {
         if use_emd && it % opts.emd_every.max(1) == 0 {
             matching = Some(assign(
@@ -553,8 +617,14 @@ pub fn refine(
                 &mut lap,
             ));
         }
-        let loss = loss_grad(&m, &x, &train, matching.as_ref(), Some(&mut g))
-            + axis_prior(&m, &x, &x0, prior_w, &mut g);
+        let loss = loss_grad(
+            &m,
+            &x,
+            &train,
+            matching.as_ref(),
+            Some(&mut g),
+            Some(&mut hints),
+        ) + axis_prior(&m, &x, &x0, prior_w, &mut g);
         let lr = opts.lr
             * (0.1
                 + 0.9 * 0.5 * (1.0 + (std::f64::consts::PI * it as f64 / opts.iters as f64).cos()));
@@ -747,7 +817,7 @@ mod tests {
             .all(|(t, c)| t == m.c || c.len() == 40));
         let mt = Some(&mt);
         let mut g = vec![0.0; m.len()];
-        loss_grad(&m, &x, &d, mt, Some(&mut g));
+        loss_grad(&m, &x, &d, mt, Some(&mut g), None);
         let h = 1e-4;
         let mut worst: f64 = 0.0;
         for i in 0..m.len() {
@@ -757,8 +827,9 @@ mod tests {
             xp[i] += h;
             let mut xm = x.clone();
             xm[i] -= h;
-            let fd =
-                (loss_grad(&m, &xp, &d, mt, None) - loss_grad(&m, &xm, &d, mt, None)) / (2.0 * h);
+            let fd = (loss_grad(&m, &xp, &d, mt, None, None)
+                - loss_grad(&m, &xm, &d, mt, None, None))
+                / (2.0 * h);
             if is_c_state || is_c_root {
                 // the canonical frame has no loss term: both must be 0
                 assert!(
