@@ -264,11 +264,24 @@ pub(crate) fn trimmed_fit(
     keep: f64,
     buf: &mut Vec<f64>,
 ) -> f64 {
+    trimmed_fit_capped(grid, pts, mo, keep, f32::INFINITY, buf)
+}
+
+/// [`trimmed_fit`] with each squared distance capped at `cap2`: a point farther than
+/// that stops its search there (`Grid::nearest_d2_capped`), which is what makes a
+/// query far from the cloud cheap.
+pub(crate) fn trimmed_fit_capped(
+    grid: &Grid,
+    pts: &[DVec3],
+    mo: &DMat4,
+    keep: f64,
+    cap2: f32,
+    buf: &mut Vec<f64>,
+) -> f64 {
     buf.clear();
     buf.extend(
-        pts.iter().map(|x| {
-            grid.nearest_d2_capped(mo.transform_point3(*x).as_vec3(), f32::INFINITY) as f64
-        }),
+        pts.iter()
+            .map(|x| grid.nearest_d2_capped(mo.transform_point3(*x).as_vec3(), cap2) as f64),
     );
     if buf.is_empty() {
         return 0.0;
