@@ -404,12 +404,9 @@ mod tests {
         }
     }
 
-    #[test]
-    fn hinted_query_matches_brute_force_from_any_hint() {
-        // Hints near the answer (the last answer of a query that moved a little) and
-        // far from it (a stale one): the answer is the nearest point either way.
-        let mut rng = rand::rngs::StdRng::seed_from_u64(17);
-        let pts: Vec<Vec3> = (0..2500)
+    /// `n` points on the sphere of radius 0.5 (directions uniform in the cube, projected).
+    fn sphere(rng: &mut rand::rngs::StdRng, n: usize) -> Vec<Vec3> {
+        (0..n)
             .map(|_| {
                 let v = Vec3::new(
                     rng.random_range(-1.0..1.0),
@@ -418,7 +415,15 @@ mod tests {
                 );
                 v.normalize_or_zero() * 0.5
             })
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn hinted_query_matches_brute_force_from_any_hint() {
+        // Hints near the answer (the last answer of a query that moved a little) and
+        // far from it (a stale one): the answer is the nearest point either way.
+        let mut rng = rand::rngs::StdRng::seed_from_u64(17);
+        let pts = sphere(&mut rng, 2500);
         let g = Grid::new(&pts);
         for k in 0..3000 {
             let q = Vec3::new(
@@ -445,16 +450,7 @@ mod tests {
         // Queries just off the points (the common case: the box paths) and caps
         // below and above the cell size.
         let mut rng = rand::rngs::StdRng::seed_from_u64(11);
-        let pts: Vec<Vec3> = (0..3000)
-            .map(|_| {
-                let v = Vec3::new(
-                    rng.random_range(-1.0..1.0),
-                    rng.random_range(-1.0..1.0),
-                    rng.random_range(-1.0..1.0),
-                );
-                v.normalize_or_zero() * 0.5
-            })
-            .collect();
+        let pts = sphere(&mut rng, 3000);
         let g = Grid::new(&pts);
         for k in 0..3000 {
             let p = pts[k % pts.len()];
