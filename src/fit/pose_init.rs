@@ -14,7 +14,7 @@ use nalgebra::{Matrix3, Vector3};
 use super::fitter::Data;
 use super::flow::{OtFlow, SceneFlow};
 use super::gaussians::{argmin_maha, Gauss, Params};
-use crate::geom::knn::Grid;
+use crate::geom::knn::{Grid, LastMatches};
 
 /// Options of the pose initialisation.
 #[derive(Debug, Clone, Copy)]
@@ -92,34 +92,22 @@ pub fn trimmed_icp(
     keep: f64,
     dst: &mut Vec<DVec3>,
 ) -> (DMat3, DVec3) {
-    // Each point's match of the last round: after the first round the points move
-    // little, and the old match bounds the search (`Grid::nearest_hinted`).
-    let mut matched: Vec<u32> = Vec::new();
     if grid.is_empty() {
         return mo;
     }
-    for round in 0..rounds {
+    // After the first round the points move little: each starts its search from its
+    // last match.
+    let mut matched = LastMatches::default();
+    matched.fit(pts.len());
+    for _ in 0..rounds {
         dst.clear();
         for (i, p) in pts.iter().enumerate() {
             let x = mo.0 * *p + mo.1;
-            let q = x.as_vec3();
-            let nn = if round == 0 {
-                grid.nearest(q)
-            } else {
-                let j = matched[i];
-                grid.nearest_hinted(q, (j, cloud(j as usize).as_vec3()))
-            };
-            match nn {
-                Some((j, _)) => {
-                    if round == 0 {
-                        matched.push(j);
-                    } else {
-                        matched[i] = j;
-                    }
-                    dst.push(cloud(j as usize));
-                }
-                None => return mo, // not reached: the grid is not empty
-            }
+            dst.push(
+                matched
+                    .nearest(grid, i, x.as_vec3(), |j| cloud(j).as_vec3())
+                    .map_or(x, |(j, _)| cloud(j as usize)),
+            );
         }
         match kabsch_trimmed(pts, dst, keep) {
             Some(f) => mo = f,

@@ -30,6 +30,41 @@ pub(crate) fn clamped_cell(p: Vec3, min: Vec3, inv_cell: f32, dims: [usize; 3]) 
     ]
 }
 
+/// Each of `n` repeated queries' last match, for queries whose points move a little
+/// between rounds (ICP, an optimiser's steps): the old match starts the next search
+/// (`Grid::nearest_hinted`), which returns the same nearest point, faster.
+#[derive(Debug, Clone, Default)]
+pub struct LastMatches(Vec<u32>);
+
+impl LastMatches {
+    /// Ready for `n` queries: kept if it already holds `n`, else none matched yet.
+    pub fn fit(&mut self, n: usize) {
+        if self.0.len() != n {
+            self.0.clear();
+            self.0.resize(n, u32::MAX);
+        }
+    }
+
+    /// Nearest point of `grid` to query `i` (< `n` of `fit`) at `q`, starting from
+    /// its last match (`at(j)`: indexed point j's position); records the new one.
+    pub fn nearest(
+        &mut self,
+        grid: &Grid,
+        i: usize,
+        q: Vec3,
+        at: impl Fn(usize) -> Vec3,
+    ) -> Option<(u32, f32)> {
+        let last = self.0[i];
+        let nn = if last == u32::MAX {
+            grid.nearest(q)
+        } else {
+            grid.nearest_hinted(q, (last, at(last as usize)))
+        }?;
+        self.0[i] = nn.0;
+        Some(nn)
+    }
+}
+
 /// Uniform grid over the bounding box of a point set.
 #[derive(Debug, Clone, Default)]
 pub struct Grid {
@@ -442,6 +477,25 @@ mod tests {
             assert_eq!(d, brute(&pts, q), "{q:?}");
             assert_eq!(d, d0);
             assert_eq!(pts[j as usize].distance_squared(q), d);
+        }
+    }
+
+    #[test]
+    fn last_matches_give_the_nearest_points_as_queries_move() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(23);
+        let pts = sphere(&mut rng, 2000);
+        let g = Grid::new(&pts);
+        let mut qs: Vec<Vec3> = (0..300).map(|i| pts[i * 5] * 1.1).collect();
+        let mut last = LastMatches::default();
+        last.fit(qs.len());
+        for _ in 0..5 {
+            for (i, q) in qs.iter().enumerate() {
+                let (_, d) = last.nearest(&g, i, *q, |j| pts[j]).unwrap();
+                assert_eq!(d, brute(&pts, *q), "{q:?}");
+            }
+            // Queries drift, as points do between ICP rounds.
+            qs.iter_mut()
+                .for_each(|q| *q = *q * 0.98 + Vec3::splat(0.003));
         }
     }
 

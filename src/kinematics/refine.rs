@@ -52,7 +52,7 @@ use super::chain::screw_exp;
 use super::project::bfs_order;
 use super::screw::{state_range, unwrap_angles};
 use crate::geom::assignment::Lap;
-use crate::geom::knn::Grid;
+use crate::geom::knn::{Grid, LastMatches};
 use crate::geom::se3::{from_row_major, to_row_major};
 use crate::io::gt::JointType;
 use crate::io::result::FitResult;
@@ -222,9 +222,13 @@ fn chamfer(
     }
     let (ny, nx) = (y.len() as f32, x.len() as f32);
     let mut loss = 0.0f64;
+    if let Some(h) = hints.as_deref_mut() {
+        h.to_target.fit(y.len());
+        h.to_model.fit(x.len());
+    }
     for (i, yi) in y.iter().enumerate() {
         let nn = match hints.as_deref_mut() {
-            Some(h) => h.to_target.nearest(xg, (i, y.len()), *yi, x),
+            Some(h) => h.to_target.nearest(xg, i, *yi, |j| x[j]),
             None => xg.nearest(*yi),
         };
         if let Some((j, d)) = nn {
@@ -235,7 +239,7 @@ fn chamfer(
     yg.rebuild(y);
     for (m, xm) in x.iter().enumerate() {
         let nn = match hints.as_deref_mut() {
-            Some(h) => h.to_model.nearest(yg, (m, x.len()), *xm, y),
+            Some(h) => h.to_model.nearest(yg, m, *xm, |j| y[j]),
             None => yg.nearest(*xm),
         };
         if let Some((i, d)) = nn {
@@ -257,36 +261,9 @@ pub(crate) struct Hints {
 #[derive(Default)]
 pub(crate) struct FrameHints {
     /// Model point → target point.
-    to_target: Matches,
+    to_target: LastMatches,
     /// Target point → model point.
-    to_model: Matches,
-}
-
-/// `0[i]`: query i's last match (`u32::MAX`: none yet).
-#[derive(Default)]
-struct Matches(Vec<u32>);
-
-impl Matches {
-    /// Nearest point of `grid` (over `pts`) to query `i` of `n` at `q`, hinted by
-    /// query `i`'s last match; records the new one.
-    fn nearest(
-        &mut self,
-        grid: &Grid,
-        (i, n): (usize, usize),
-        q: Vec3,
-        pts: &[Vec3],
-    ) -> Option<(u32, f32)> {
-        if self.0.len() != n {
-            self.0.clear();
-            self.0.resize(n, u32::MAX);
-        }
-        let nn = match pts.get(self.0[i] as usize) {
-            Some(&p) => grid.nearest_hinted(q, (self.0[i], p)),
-            None => grid.nearest(q),
-        }?;
-        self.0[i] = nn.0;
-        Some(nn)
-    }
+    to_model: LastMatches,
 }
 
 /// Sampled data of the refinement: source points (frame c) with parts, targets per frame.
