@@ -525,6 +525,23 @@ pub fn finish(
         step1.candidates.iter().map(|c| c.0).collect::<Vec<_>>(),
         result.parts
     ));
+    // Fast's extra candidate (`fit::select::extra_candidate`): the two ends of a range,
+    // then one above it (a range tried whole has consecutive part counts).
+    if let [(lo, bottom), (hi, top), (up, _)] = step1.candidates[..] {
+        if hi > lo + 1
+            && crate::fit::select::extra_candidate(
+                &step1.candidates[..2],
+                Quality::Fast,
+                step1.occlusion_used,
+                true,
+            ) == Some(up)
+        {
+            notes.push(format!(
+                "m = {hi} ended at {top:.2e}, above {} × m = {lo}'s {bottom:.2e} (a failed fit: more Gaussians fit at least as well), so m = {up} was tried too",
+                crate::fit::select::FAILED_RATIO
+            ));
+        }
+    }
     if step1.held_still > 0 {
         let why = if step1.occlusion_used {
             "the frames agree better with no motion than with theirs"

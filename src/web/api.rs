@@ -306,6 +306,27 @@ pub fn best_candidate(ms: Vec<u32>, losses: Vec<f64>) -> Result<u32, JsError> {
         .ok_or_else(|| JsError::new("no candidate finished with a finite loss"))
 }
 
+/// One more part count the page fits after its candidates `(m, loss)` (ordered by m)
+/// finished, or `undefined`: the core's rule (`fit::select::extra_candidate`: Fast,
+/// full input, the default range, its top failed). `occluded`: a candidate reported
+/// that it fitted the frames as occluded; `default_range`: the range is the one
+/// `default_part_range` gave for these frames.
+#[wasm_bindgen]
+pub fn extra_candidate(
+    ms: Vec<u32>,
+    losses: Vec<f64>,
+    options: JsValue,
+    occluded: bool,
+    default_range: bool,
+) -> Result<Option<u32>, JsError> {
+    let opts = options_from_js(options)?;
+    let cands: Vec<(usize, f64)> = ms.iter().map(|&m| m as usize).zip(losses).collect();
+    Ok(
+        crate::fit::select::extra_candidate(&cands, opts.quality, occluded, default_range)
+            .map(|m| m as u32),
+    )
+}
+
 /// Metrics of a result against ground truth (SPEC §5): `gt` is `gt.json` text,
 /// `frames`/`labels` the observed points and their ground-truth part labels per frame
 /// (the order of the result's labels). Returns `{mean_ri, canonical_ri,

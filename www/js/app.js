@@ -562,7 +562,7 @@ async function startFit() {
   $('fit-status').innerHTML = `Trying ${tried} Gaussians (${par} in parallel${fits}), ${opts.quality} quality.`;
   const cands = new Map(); // m -> {iter, total, done}
   let totalGuess = 0;
-  const nCand = parts.length;
+  let nCand = parts.length;
   const step1Progress = () => {
     let done = 0, tot = 0;
     for (const c of cands.values()) { done += c.done ? c.total : c.iter; tot += c.total; }
@@ -601,6 +601,8 @@ async function startFit() {
     gt: gtOk ? S.gt : null,
     labels: gtOk ? good.map((f) => f.labels) : null,
     bestOf: (ms, losses) => wasm.best_candidate(Uint32Array.from(ms), Float64Array.from(losses)),
+    extraCandidate: (ms, losses, occluded) => wasm.extra_candidate(Uint32Array.from(ms), Float64Array.from(losses),
+      opts, occluded, opts.parts === null) ?? null,
     secondLook: (best, runner) => wasm.second_look(best, runner),
     callbacks: {
       onCandidateStart: (m) => {
@@ -620,6 +622,14 @@ async function startFit() {
         if (p.total) S.chart.add(`m${m}`, `m=${m}`, p.iter / p.total, y);
         if (p.snapshot && m === S.focusM) pendingSnap = [m, p.snapshot];
         scheduleUi();
+      },
+      onExtraCandidate: (m, done) => {
+        nCand += 1;
+        const top = done[done.length - 1];
+        const bottom = done[0];
+        $('fit-status').innerHTML = `m = ${top.m} fitted worse than m = ${bottom.m}`
+          + ` (final Chamfer ${top.loss.toExponential(2)} against ${bottom.loss.toExponential(2)}): trying m = ${m} too.`;
+        step1Progress();
       },
       onCandidateDone: (m) => {
         const c = cands.get(m);

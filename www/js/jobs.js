@@ -83,12 +83,13 @@ export function maxParallel() {
 /**
  * Runs a whole fit. Callbacks:
  *   onCandidateStart(m), onWorking(m, frames), onCandidateProgress(m, msg),
- *   onCandidateDone(m, {loss, ms}), onFinishProgress(msg)
+ *   onCandidateDone(m, {loss, ms}), onExtraCandidate(m, done), onFinishProgress(msg)
+ * `extraCandidate(ms, losses, occluded)`: one more m to fit after the first ones, or null.
  * Resolves with {result, metrics, metricsError, candidates: [{m, loss, ms}], best}
  * (`best`: the kept candidate, the runner-up when the second look took it).
  */
 export class FitJob {
-  constructor({ frames, names, options, parts, gt, labels, bestOf, secondLook, callbacks }) {
+  constructor({ frames, names, options, parts, gt, labels, bestOf, extraCandidate, secondLook, callbacks }) {
     this.frames = frames;
     this.names = names;
     this.options = options;
@@ -96,6 +97,7 @@ export class FitJob {
     this.gt = gt;
     this.labels = labels;
     this.bestOf = bestOf;
+    this.extraCandidate = extraCandidate;
     this.secondLook = secondLook;
     this.cb = callbacks;
     this.lanes = [];
@@ -132,6 +134,16 @@ export class FitJob {
       await Promise.all(this.lanes.map(runLane));
       if (this.cancelled) throw new CancelledError();
       done.sort((a, b) => a.m - b.m);
+      // The core may want one more part count now that these finished (fast, full
+      // input: the top of the default range failed; `fit::select::extra_candidate`).
+      const extra = this.extraCandidate?.(done.map((c) => c.m), done.map((c) => c.loss), occluded) ?? null;
+      if (extra !== null && !done.some((c) => c.m === extra)) {
+        this.cb.onExtraCandidate?.(extra, done);
+        queue.push(extra);
+        await runLane(this.lanes[0]);
+        if (this.cancelled) throw new CancelledError();
+        done.sort((a, b) => a.m - b.m);
+      }
       const best = this.bestOf(done.map((c) => c.m), done.map((c) => c.loss));
       // The runner-up gets its own Steps 2–3 too (full input; the core's second look,
       // `pipeline::second_look`, keeps it when the best leaves clearly more of the
