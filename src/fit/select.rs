@@ -635,8 +635,14 @@ pub fn select_all(
     }
     let fitted: Vec<(usize, f64)> = results.iter().map(|r| (r.m, r.final_chamfer)).collect();
     if let Some(up) = extra_candidate(&fitted, opts.quality, prep.occluded, opts.parts.is_none()) {
+        // Beyond the range asked for, a fit that cannot run (frames with fewer than `up`
+        // points) leaves the range's candidates as they are; a cancel still cancels.
         for r in run_all(&prep, &[up], opts, cb) {
-            results.push(r?);
+            match r {
+                Ok(r) => results.push(r),
+                Err(Error::Cancelled) => return Err(Error::Cancelled),
+                Err(_) => {}
+            }
         }
     }
     let cands: Vec<(usize, f64)> = results.iter().map(|r| (r.m, r.final_chamfer)).collect();

@@ -140,7 +140,12 @@ export class FitJob {
       if (extra !== null && !done.some((c) => c.m === extra)) {
         this.cb.onExtraCandidate?.(extra, done);
         queue.push(extra);
-        await runLane(this.lanes[0]);
+        // Beyond the range asked for, a fit that fails leaves the range's candidates (as
+        // natively); a cancel still cancels.
+        await runLane(this.lanes[0]).catch((e) => {
+          if (e instanceof CancelledError || this.cancelled) throw e;
+          console.warn(`m = ${extra}:`, e);
+        });
         if (this.cancelled) throw new CancelledError();
         done.sort((a, b) => a.m - b.m);
       }
