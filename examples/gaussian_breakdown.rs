@@ -7,6 +7,7 @@
 //!
 //! Usage: `cargo run --release --example gaussian_breakdown -- RESULT.json SEQ_DIR`
 
+use gsart::math::Libm;
 use std::path::Path;
 
 use glam::{DMat3, DVec3};
@@ -43,7 +44,7 @@ fn main() {
             .iter()
             .map(|g| {
                 let s = DVec3::from(g.scale);
-                let log_s = DVec3::new(s.x.ln(), s.y.ln(), s.z.ln());
+                let log_s = DVec3::new(s.x.lln(), s.y.lln(), s.z.lln());
                 Gauss::new(rotation(g, t), DVec3::from(g.center[t]), log_s)
             })
             .collect()
@@ -62,7 +63,7 @@ fn main() {
         for t in 0..result.frames {
             let d = rotation(g, t) * rotation(g, c).transpose();
             let cos = ((d.x_axis.x + d.y_axis.y + d.z_axis.z - 1.0) / 2.0).clamp(-1.0, 1.0);
-            turn = turn.max(cos.acos().to_degrees());
+            turn = turn.max(cos.lacos().to_degrees());
             shift = shift.max((DVec3::from(g.center[t]) - DVec3::from(g.center[c])).length());
         }
         let row: Vec<String> = counts[i].iter().map(|n| format!("{n:5}")).collect();

@@ -5,6 +5,7 @@
 //!
 //! Usage: `cargo run --release --example pose_search_oracle -- SEQ_DIR [--no-search] [--no-init]`
 
+use gsart::math::Libm;
 use std::path::Path;
 
 use glam::{DMat3, DVec3, Vec3};
@@ -64,7 +65,7 @@ fn main() {
         }
         let s = DVec3::new(e.eigenvalues[0], e.eigenvalues[1], e.eigenvalues[2])
             .max(DVec3::splat(1e-8));
-        params.set_log_scale(p, DVec3::new(s.x.ln(), s.y.ln(), s.z.ln()) * 0.5);
+        params.set_log_scale(p, DVec3::new(s.x.lln(), s.y.lln(), s.z.lln()) * 0.5);
         let o = params.layout.rot(0, p);
         params.x[o..o + 6].copy_from_slice(&[
             r.x_axis.x, r.x_axis.y, r.x_axis.z, r.y_axis.x, r.y_axis.y, r.y_axis.z,

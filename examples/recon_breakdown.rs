@@ -10,6 +10,7 @@
 //!
 //! Usage: `cargo run --release --example recon_breakdown -- RESULT.json SEQ_DIR [--step1] [--rot]`
 
+use gsart::math::Libm;
 use std::path::Path;
 
 use glam::{DMat4, DVec3};
@@ -105,7 +106,7 @@ fn main() {
                     let gm: DMat4 = gt.poses[t][g] * rigid_inverse(&gt.poses[c][g]);
                     let r = glam::DMat3::from_mat4(pm).transpose() * glam::DMat3::from_mat4(gm);
                     let cos = ((r.x_axis.x + r.y_axis.y + r.z_axis.z - 1.0) / 2.0).clamp(-1.0, 1.0);
-                    format!("{:5.0}", cos.acos().to_degrees())
+                    format!("{:5.0}", cos.lacos().to_degrees())
                 })
                 .collect()
         } else {

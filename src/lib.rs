@@ -13,6 +13,7 @@ pub mod fit;
 pub mod geom;
 pub mod io;
 pub mod kinematics;
+pub mod math;
 pub mod normalisation;
 pub mod pipeline;
 pub mod synth;

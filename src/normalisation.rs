@@ -9,6 +9,7 @@
 //! and a box away from the origin is centred. The pipeline maps everything it reports (snapshots, the Step-1
 //! model, the result) back to input units.
 //!
+use crate::math::Libm;
 use glam::{DMat3, DMat4, DVec3, Vec3};
 
 use crate::io::sequence::Sequence;
@@ -182,7 +183,7 @@ impl Normalisation {
         if self.is_identity() {
             return;
         }
-        let ln_s = self.scale.ln() as f32;
+        let ln_s = self.scale.lln() as f32;
         for s in &mut model.log_scale {
             for v in s {
                 *v += ln_s;

@@ -2,6 +2,7 @@
 //! Step 3 joints), with progress reporting and cancellation through a callback.
 //! Nothing here depends on the browser: the worker and the CLI both drive it.
 
+use crate::math::Libm;
 use serde::{Deserialize, Serialize};
 
 /// Occlusion handling (partial / occluded input losses of the supplement).
@@ -454,7 +455,7 @@ pub fn finish(
     result.gaussians = Some(
         (0..m)
             .map(|i| {
-                let s = step1.model.log_scale[i].map(|v| (v as f64).exp());
+                let s = step1.model.log_scale[i].map(|v| (v as f64).lexp());
                 ResultGaussian {
                     part: part_of(i as u32) as usize,
                     scale: s,

@@ -2,6 +2,7 @@
 //! rotating about a hinge, 4 frames sampled independently. The fit must segment
 //! it (Rand index ≥ 0.9), be deterministic for a seed, and stop on cancel.
 
+use gsart::math::Libm;
 use std::cell::Cell;
 
 use glam::{Quat, Vec3};
@@ -243,7 +244,7 @@ fn reports_in_input_units() {
     for (sa, sb) in a.model.log_scale.iter().zip(&b.model.log_scale) {
         for (x, y) in sa.iter().zip(sb) {
             assert!(
-                (y - x - 1000f32.ln()).abs() < 0.02,
+                (y - x - 1000f32.lln()).abs() < 0.02,
                 "log-scales {x} m, {y} mm"
             );
         }

@@ -1,6 +1,7 @@
 //! Sequences: folders and file lists in natural order, browser buffers, downsampling,
 //! and a million-point frame through the streaming path.
 
+use gsart::math::Libm;
 mod io_common;
 
 use std::collections::HashSet;
@@ -217,7 +218,7 @@ fn write_sphere(path: &std::path::Path, n: usize, k: usize) {
             let t = i as f32 * 2.399_963;
             let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
             let r = (1.0 - z * z).sqrt();
-            Vec3::new(r * t.cos() + k as f32, r * t.sin(), z)
+            Vec3::new(r * t.lcos() + k as f32, r * t.lsin(), z)
         })
         .collect();
     let labels: Vec<u32> = pts.iter().map(|p| (p.z > 0.0) as u32).collect();

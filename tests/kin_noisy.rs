@@ -4,6 +4,7 @@
 //! noisy poses. The halves must be merged back, the tree and joint types must be
 //! right, and axes/pivots close. Prints projection-only vs refined errors.
 
+use gsart::math::Libm;
 mod kin_common;
 
 use glam::{DMat4, DVec3};
@@ -23,7 +24,7 @@ fn gauss(rng: &mut StdRng) -> f64 {
     // Box–Muller
     let u: f64 = rng.random_range(1e-12..1.0);
     let v: f64 = rng.random();
-    (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+    (-2.0 * u.lln()).sqrt() * (2.0 * std::f64::consts::PI * v).lcos()
 }
 
 fn noise(rng: &mut StdRng, rot_deg: f64, trans: f64) -> DMat4 {

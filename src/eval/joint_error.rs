@@ -14,6 +14,7 @@
 //!   offset along nearly parallel axes, and a point far along the axis is not
 //!   meaningful).
 
+use crate::math::Libm;
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
@@ -130,7 +131,7 @@ pub fn joint_errors(
             let cos = axis.dot(pa).abs().min(1.0);
             m.pred_child = Some(pj.child);
             m.pred_type = Some(pj.joint_type);
-            m.axis_deg = Some(cos.acos().to_degrees());
+            m.axis_deg = Some(cos.lacos().to_degrees());
             if j.joint_type == JointType::Revolute && pj.joint_type == JointType::Revolute {
                 let (sum, cnt) = centroid[g];
                 let cen = if cnt > 0 { sum / cnt as f64 } else { pivot };
@@ -197,7 +198,7 @@ mod tests {
         let u = DVec3::from(j.axis);
         let v = u.any_orthonormal_vector();
         j.pivot = (DVec3::from(j.pivot) + 0.03 * v).to_array();
-        let tilted = (u * 10f64.to_radians().cos() + v * 10f64.to_radians().sin()).normalize();
+        let tilted = (u * 10f64.to_radians().lcos() + v * 10f64.to_radians().lsin()).normalize();
         j.axis = (-tilted).to_array();
         let e = joint_errors(&r, &gt, &pts, &r.labels[c].clone(), &labels).expect("errors");
         assert!((e.max_axis_deg.unwrap() - 10.0).abs() < 1e-6, "{e:?}");

@@ -1196,6 +1196,7 @@ fn track_init(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::Libm;
     use crate::pipeline::{Control, Quality};
 
     /// Frames of a strip whose half beyond x = 0.5 curls up more in every frame, each
@@ -1210,9 +1211,9 @@ mod tests {
                         let v = (i / 40) as f32 * 0.02;
                         let a = (u - 0.5).max(0.0) * k as f32 * 0.8;
                         Vec3::new(
-                            u.min(0.5) + (u - 0.5).max(0.0) * a.cos(),
+                            u.min(0.5) + (u - 0.5).max(0.0) * a.lcos(),
                             v,
-                            (u - 0.5).max(0.0) * a.sin(),
+                            (u - 0.5).max(0.0) * a.lsin(),
                         )
                     })
                     .collect()

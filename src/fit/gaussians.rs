@@ -3,6 +3,7 @@
 //! segmentation, the rigid transfer H_{k→t} and the gradient accumulator that
 //! collects dL/dR, dL/dμ, dL/dlog s and maps them back to the flat parameters.
 
+use crate::math::Libm;
 use glam::{DMat3, DMat4, DVec3, Vec3};
 
 use super::rot6d;
@@ -100,7 +101,7 @@ impl Gauss {
         Gauss {
             r,
             mu,
-            inv_s: DVec3::new((-log_s.x).exp(), (-log_s.y).exp(), (-log_s.z).exp()),
+            inv_s: DVec3::new((-log_s.x).lexp(), (-log_s.y).lexp(), (-log_s.z).lexp()),
             log_s_sum: log_s.x + log_s.y + log_s.z,
         }
     }

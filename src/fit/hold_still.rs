@@ -242,6 +242,7 @@ mod tests {
     use super::*;
     use crate::fit::occluded_search::tests::occluded_hinge;
     use crate::fit::pose_search::tests::oracle_params;
+    use crate::math::Libm;
 
     /// `occluded_search`'s hinge (a base and an arm turning about z, seen from a
     /// different direction in every frame), every frame moved as a whole by
@@ -331,14 +332,14 @@ mod tests {
                     let phi = rng.random::<f64>() * std::f64::consts::TAU;
                     let p = if rng.random_bool(0.3) {
                         DVec3::new(
-                            0.25 * phi.cos(),
-                            0.25 * phi.sin(),
+                            0.25 * phi.lcos(),
+                            0.25 * phi.lsin(),
                             -0.1 * rng.random::<f64>(),
                         )
                     } else {
                         let rad = 0.25 * rng.random::<f64>().sqrt();
                         let z = if rng.random_bool(0.5) { 0.0 } else { -0.1 };
-                        DVec3::new(rad * phi.cos(), rad * phi.sin(), z)
+                        DVec3::new(rad * phi.lcos(), rad * phi.lsin(), z)
                     };
                     (p + base_shift(t), 0)
                 } else {

@@ -2,6 +2,7 @@
 //! rotations, isotropic scales from the cloud's extent and m; every frame starts
 //! equal to the first. (The warm-up on the first frame runs in the fitter.)
 
+use crate::math::Libm;
 use glam::{DVec3, Vec3};
 
 use super::gaussians::Params;
@@ -18,7 +19,7 @@ pub fn initial_params(first: &[Vec3], m: usize, frames: usize) -> Params {
     let ext = (hi - lo).max_element().max(1e-6) as f64;
     // A part of an m-part object spans roughly ext / m^(1/3); a Gaussian covering it
     // has σ about a quarter of that.
-    let s0 = (ext / (m.max(1) as f64).cbrt() * 0.25).ln();
+    let s0 = (ext / (m.max(1) as f64).lcbrt() * 0.25).lln();
     let idx = farthest_point_sampling(first, m, 0);
     for i in 0..m {
         let c = idx

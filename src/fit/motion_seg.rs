@@ -8,6 +8,7 @@
 //! moments of its points, keeping its motions. The pose search that follows works
 //! on groups that move rigidly.
 
+use crate::math::Libm;
 use glam::{DMat3, DVec3};
 use nalgebra::{Matrix3, Vector3};
 
@@ -134,7 +135,7 @@ pub fn resegment(data: &Data, params: &mut Params, opts: &MotionSegOpts) -> usiz
         let floor = 1e-3_f64.powi(2);
         let var = DVec3::new(e.eigenvalues[0], e.eigenvalues[1], e.eigenvalues[2])
             .max(DVec3::splat(floor));
-        let log_s = DVec3::new(var.x.ln(), var.y.ln(), var.z.ln()) * 0.5;
+        let log_s = DVec3::new(var.x.lln(), var.y.lln(), var.z.lln()) * 0.5;
         let new0 = Gauss::new(r, means[i], log_s);
         params.set_log_scale(i, log_s);
         for t in 0..kk {

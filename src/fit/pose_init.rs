@@ -321,6 +321,7 @@ pub fn refine_poses(data: &Data, params: &mut Params, opts: &PoseInitOpts) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::Libm;
     use rand::{Rng, SeedableRng};
 
     fn cloud(n: usize, seed: u64) -> Vec<DVec3> {
@@ -360,7 +361,7 @@ mod tests {
 
     fn angle(a: DMat3, b: DMat3) -> f64 {
         let m = (a.transpose() * b).to_cols_array();
-        ((m[0] + m[4] + m[8] - 1.0) / 2.0).clamp(-1.0, 1.0).acos()
+        ((m[0] + m[4] + m[8] - 1.0) / 2.0).clamp(-1.0, 1.0).lacos()
     }
 
     #[test]

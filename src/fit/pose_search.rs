@@ -27,6 +27,7 @@
 //! seven sequences is 1.59 before the main loop (7.30 without the search).
 //! Runs before the main loop (allocations outside the hot path).
 
+use crate::math::Libm;
 use glam::{DMat3, DMat4, DQuat, DVec3, Vec3};
 
 use crate::geom::cap_mask::CapMask;
@@ -133,7 +134,12 @@ pub fn uniform_rotations(n: usize) -> Vec<DMat3> {
             let big_r = (1.0 - s / n as f64).sqrt();
             let a = std::f64::consts::TAU * s / phi;
             let b = std::f64::consts::TAU * s / psi;
-            let q = DQuat::from_xyzw(r * a.sin(), r * a.cos(), big_r * b.sin(), big_r * b.cos());
+            let q = DQuat::from_xyzw(
+                r * a.lsin(),
+                r * a.lcos(),
+                big_r * b.lsin(),
+                big_r * b.lcos(),
+            );
             DMat3::from_quat(q.normalize())
         })
         .collect()
@@ -150,7 +156,7 @@ const STAY_ANGLE: f64 = std::f64::consts::FRAC_PI_4;
 /// Angle (radians) of the rotation between `a` and `b`.
 pub(crate) fn rotation_angle(a: DMat3, b: DMat3) -> f64 {
     let m = (a.transpose() * b).to_cols_array();
-    ((m[0] + m[4] + m[8] - 1.0) / 2.0).clamp(-1.0, 1.0).acos()
+    ((m[0] + m[4] + m[8] - 1.0) / 2.0).clamp(-1.0, 1.0).lacos()
 }
 
 /// The target cloud of one frame for the search: the frame's points not yet
@@ -1083,7 +1089,7 @@ pub(crate) mod tests {
             let c = pts.iter().fold(DVec3::ZERO, |s, p| s + *p) / pts.len() as f64;
             let var =
                 pts.iter().fold(DVec3::ZERO, |s, p| s + (*p - c) * (*p - c)) / pts.len() as f64;
-            params.set_log_scale(i, DVec3::new(var.x.ln(), var.y.ln(), var.z.ln()) * 0.5);
+            params.set_log_scale(i, DVec3::new(var.x.lln(), var.y.lln(), var.z.lln()) * 0.5);
             params.set_center(0, i, c);
         }
         params.broadcast_frame(0);
@@ -1166,7 +1172,7 @@ pub(crate) mod tests {
                 .iter()
                 .map(|r| {
                     let m = (r.transpose() * q).to_cols_array();
-                    ((m[0] + m[4] + m[8] - 1.0) / 2.0).clamp(-1.0, 1.0).acos()
+                    ((m[0] + m[4] + m[8] - 1.0) / 2.0).clamp(-1.0, 1.0).lacos()
                 })
                 .fold(f64::INFINITY, f64::min);
             assert!(best.to_degrees() < 45.0, "{}", best.to_degrees());
@@ -1311,11 +1317,11 @@ pub(crate) mod tests {
                     let th = rng.random::<f64>() * std::f64::consts::TAU;
                     if rng.random_bool(0.7) {
                         let x = rng.random::<f64>() * 0.12;
-                        ra * DVec3::new(x, 0.05 * th.cos(), 0.05 * th.sin())
+                        ra * DVec3::new(x, 0.05 * th.lcos(), 0.05 * th.lsin())
                     } else {
                         let r = 0.05 * rng.random::<f64>().sqrt();
                         let x = if rng.random_bool(0.5) { 0.0 } else { 0.12 };
-                        ra * DVec3::new(x, r * th.cos(), r * th.sin())
+                        ra * DVec3::new(x, r * th.lcos(), r * th.lsin())
                     }
                 }
                 _ => {

@@ -745,6 +745,7 @@ fn run_all(
 mod size_rule_tests {
     use super::*;
     use crate::io::sequence::Frame;
+    use crate::math::Libm;
 
     fn seq(sizes: &[usize]) -> Sequence {
         Sequence {
@@ -871,7 +872,7 @@ mod size_rule_tests {
                     points: (0..200)
                         .map(|i| {
                             let a = i as f32 * 0.1 + k as f32 * 0.05;
-                            glam::Vec3::new(a.cos(), a.sin(), i as f32 * 0.01 + shift)
+                            glam::Vec3::new(a.lcos(), a.lsin(), i as f32 * 0.01 + shift)
                         })
                         .collect(),
                     ..Default::default()
@@ -912,7 +913,7 @@ mod size_rule_tests {
                 let a = i as f32 * 2.399_963;
                 let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
                 let r = (1.0 - z * z).max(0.0).sqrt();
-                glam::Vec3::new(r * a.cos(), r * a.sin(), z)
+                glam::Vec3::new(r * a.lcos(), r * a.lsin(), z)
             })
         };
         let opts = FitOptions {
@@ -944,7 +945,7 @@ mod size_rule_tests {
                     let z = 1.0 - (2.0 / 3.0) * (i as f64 + 0.5) / n as f64;
                     let r = (1.0 - z * z).sqrt();
                     let phi = i as f64 * 2.399_963;
-                    (d * z + u * (r * phi.cos()) + w * (r * phi.sin())).as_vec3()
+                    (d * z + u * (r * phi.lcos()) + w * (r * phi.lsin())).as_vec3()
                 })
                 .collect()
         };
@@ -1060,9 +1061,9 @@ mod size_rule_tests {
                 0.0
             };
             glam::Vec3::new(
-                u.min(0.5) + (u - 0.5).max(0.0) * a.cos(),
+                u.min(0.5) + (u - 0.5).max(0.0) * a.lcos(),
                 v,
-                (u - 0.5).max(0.0) * a.sin(),
+                (u - 0.5).max(0.0) * a.lsin(),
             )
         })
     }

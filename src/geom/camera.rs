@@ -6,6 +6,7 @@
 //! only forwards DOM events here.
 
 use crate::error::{Error, Result};
+use crate::math::Libm;
 use glam::{Mat4, Vec3};
 
 /// Which world axis points up on screen (URDF robots are z-up, many meshes y-up).
@@ -86,8 +87,8 @@ impl OrbitCamera {
     /// Unit vector from target to eye.
     pub fn eye_direction(&self) -> Vec3 {
         let (a, b, up) = self.up.basis();
-        let (sy, cy) = self.yaw.sin_cos();
-        let (sp, cp) = self.pitch.sin_cos();
+        let (sy, cy) = self.yaw.lsin_cos();
+        let (sp, cp) = self.pitch.lsin_cos();
         a * (cp * cy) + b * (cp * sy) + up * sp
     }
 
@@ -147,7 +148,7 @@ impl OrbitCamera {
 
     /// World units per CSS pixel at the target's depth.
     pub fn world_per_pixel(&self) -> f32 {
-        2.0 * self.distance * (self.fov_y * 0.5).tan() / self.viewport[1].max(1.0)
+        2.0 * self.distance * (self.fov_y * 0.5).ltan() / self.viewport[1].max(1.0)
     }
 
     /// Move the target so the scene follows the pointer by (dx, dy) CSS pixels.
@@ -170,7 +171,7 @@ impl OrbitCamera {
     /// Wheel delta (pixels, as `WheelEvent.deltaY` in pixel mode) to a zoom.
     pub fn wheel(&mut self, delta_y: f32) {
         if delta_y.is_finite() {
-            self.zoom((delta_y.clamp(-500.0, 500.0) * 0.0015).exp());
+            self.zoom((delta_y.clamp(-500.0, 500.0) * 0.0015).lexp());
         }
     }
 
@@ -183,9 +184,9 @@ impl OrbitCamera {
         self.target = (min + max) * 0.5;
         let radius = ((max - min).length() * 0.5).max(1e-3);
         let half_v = self.fov_y * 0.5;
-        let half_h = (half_v.tan() * self.aspect()).atan();
+        let half_h = (half_v.ltan() * self.aspect()).latan();
         let half = half_v.min(half_h);
-        self.distance = (radius / half.sin() * 1.05).clamp(MIN_DISTANCE, MAX_DISTANCE);
+        self.distance = (radius / half.lsin() * 1.05).clamp(MIN_DISTANCE, MAX_DISTANCE);
     }
 
     /// Default orientation, then frame the box.

@@ -147,6 +147,7 @@ impl CapMask {
 mod tests {
     use super::*;
     use crate::geom::knn::Grid;
+    use crate::math::Libm;
     use rand::{Rng, SeedableRng};
 
     #[test]
@@ -156,7 +157,7 @@ mod tests {
         let pts: Vec<Vec3> = (0..3000)
             .map(|_| {
                 let (u, v): (f32, f32) = (rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
-                Vec3::new(u, v, 0.3 * (u * 2.0).sin() * v)
+                Vec3::new(u, v, 0.3 * (u * 2.0).lsin() * v)
             })
             .collect();
         let grid = Grid::new(&pts);

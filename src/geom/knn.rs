@@ -8,6 +8,7 @@
 //! answers in a handful of cell visits and rebuilds with two linear passes and no
 //! allocation.
 
+use crate::math::Libm;
 use glam::Vec3;
 
 /// A query whose search radius (the cap, or the distance found in its own cell) is
@@ -122,7 +123,7 @@ impl Grid {
         // surface meets. Use a volume rule with a floor that keeps cells small enough.
         let target_cells = (n as f32 / 2.0).max(1.0);
         let vol = ext.x * ext.y * ext.z;
-        let mut cell = (vol / target_cells).cbrt();
+        let mut cell = (vol / target_cells).lcbrt();
         // Flat or thin clouds: do not let one degenerate axis blow the cell size up.
         let longest = ext.max_element();
         cell = cell.min(longest / (n as f32).sqrt().max(1.0) * 2.0);

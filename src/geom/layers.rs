@@ -9,6 +9,7 @@
 //! its whole surfaces by a wide margin; sparse thin objects look one-layered. The
 //! measurements and the threshold are at `fit::select::SINGLE_VIEW_LAYERED`.
 
+use crate::math::Libm;
 use glam::{DVec3, Vec3};
 
 use super::knn::point_spacing;
@@ -28,7 +29,7 @@ fn fibonacci(n: usize) -> Vec<DVec3> {
             let z = 1.0 - (2.0 * i as f64 + 1.0) / n as f64;
             let r = (1.0 - z * z).max(0.0).sqrt();
             let a = ga * i as f64;
-            DVec3::new(r * a.cos(), r * a.sin(), z)
+            DVec3::new(r * a.lcos(), r * a.lsin(), z)
         })
         .collect()
 }
@@ -113,7 +114,7 @@ pub fn layered_fraction(points: &[Vec3]) -> Option<f64> {
         let mut improved = false;
         for k in 0..8 {
             let a = k as f64 * std::f64::consts::FRAC_PI_4;
-            let v = (best.1 + step * (a.cos() * u + a.sin() * w)).normalize();
+            let v = (best.1 + step * (a.lcos() * u + a.lsin() * w)).normalize();
             let s = views.hidden(v);
             if s < best.0 {
                 best = (s, v);

@@ -1078,12 +1078,17 @@ pub fn write_ply(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::Libm;
 
     fn cube(n: usize) -> Vec<Vec3> {
         (0..n)
             .map(|i| {
                 let f = i as f32;
-                Vec3::new((f * 0.37).sin(), (f * 0.71).cos(), (f * 1.13).sin() * 0.5)
+                Vec3::new(
+                    (f * 0.37).lsin(),
+                    (f * 0.71).lcos(),
+                    (f * 1.13).lsin() * 0.5,
+                )
             })
             .collect()
     }

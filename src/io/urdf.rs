@@ -12,6 +12,7 @@
 //! [`crate::kinematics::chain::Chain`] FK times the link offset `Tr(pivot)`; the tests
 //! check it.
 
+use crate::math::Libm;
 use std::fmt::Write;
 
 use glam::{DMat3, DVec3, Vec3};
@@ -78,12 +79,12 @@ pub fn oriented_box(points: &[Vec3]) -> Option<OrientedBox> {
 pub fn rpy(r: &DMat3) -> DVec3 {
     // glam is column-major: r.col(j)[i] = R[i][j]
     let m = |i: usize, j: usize| r.col(j)[i];
-    let pitch = (-m(2, 0)).clamp(-1.0, 1.0).asin();
+    let pitch = (-m(2, 0)).clamp(-1.0, 1.0).lasin();
     if m(2, 0).abs() < 1.0 - 1e-12 {
-        DVec3::new(m(2, 1).atan2(m(2, 2)), pitch, m(1, 0).atan2(m(0, 0)))
+        DVec3::new(m(2, 1).latan2(m(2, 2)), pitch, m(1, 0).latan2(m(0, 0)))
     } else {
         // gimbal lock: put everything into yaw
-        DVec3::new(0.0, pitch, (-m(0, 1)).atan2(m(1, 1)))
+        DVec3::new(0.0, pitch, (-m(0, 1)).latan2(m(1, 1)))
     }
 }
 

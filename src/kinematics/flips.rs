@@ -33,6 +33,7 @@
 //! that follow it agree on (`refit_pivot`, `joint_sweep`). Measured effects and the variants
 //! tried are in docs/DEVELOPMENT.md ("Half-turn repair", "Joint sweep").
 
+use crate::math::Libm;
 use glam::{DMat3, DMat4, DVec3, Vec3};
 use nalgebra::{Matrix3, SymmetricEigen};
 
@@ -276,7 +277,7 @@ fn cone_angle(u: DVec3, a: DVec3, b: DVec3) -> Option<f64> {
     if pa.length() < 1e-3 || pb.length() < 1e-3 {
         return None;
     }
-    Some(u.dot(pa.cross(pb)).atan2(pa.dot(pb)))
+    Some(u.dot(pa.cross(pb)).latan2(pa.dot(pb)))
 }
 
 /// The turn about the symmetry axis `a` (through `c`) that brings relative motion
@@ -822,7 +823,7 @@ pub(crate) mod tests {
                     ),
                     None => (j as f32 * std::f32::consts::TAU / 12.0, i as f32 * 0.0125),
                 };
-                pts.push(Vec3::new(0.03 * a.cos(), 0.03 * a.sin(), 0.12 + z));
+                pts.push(Vec3::new(0.03 * a.lcos(), 0.03 * a.lsin(), 0.12 + z));
                 labels.push(1);
             }
         }
@@ -1043,7 +1044,7 @@ pub(crate) mod tests {
             &motions.iter().map(|m| m[1]).collect::<Vec<_>>(),
             extents[1],
         );
-        let deg = after.axis.cross(DVec3::Y).length().asin().to_degrees();
+        let deg = after.axis.cross(DVec3::Y).length().lasin().to_degrees();
         assert!(deg < 2.0, "axis {} is {deg}° off", after.axis);
     }
 

@@ -44,6 +44,7 @@
 //! The refined model is kept only if it lowers the loss on a second seeded subsample
 //! (independent of the first when frames hold more points than the sample).
 
+use crate::math::Libm;
 use glam::{DMat3, DMat4, DVec3, Vec3};
 use rand::{rngs::StdRng, seq::index::sample, SeedableRng};
 use serde::Serialize;
@@ -199,8 +200,8 @@ fn left_jacobian(phi: DVec3) -> DMat3 {
         (0.5 - th * th / 24.0, 1.0 / 6.0 - th * th / 120.0)
     } else {
         (
-            (1.0 - th.cos()) / (th * th),
-            (th - th.sin()) / (th * th * th),
+            (1.0 - th.lcos()) / (th * th),
+            (th - th.lsin()) / (th * th * th),
         )
     };
     DMat3::IDENTITY + k * a + k * k * b
@@ -604,7 +605,9 @@ pub fn refine(
         ) + axis_prior(&m, &x, &x0, prior_w, &mut g);
         let lr = opts.lr
             * (0.1
-                + 0.9 * 0.5 * (1.0 + (std::f64::consts::PI * it as f64 / opts.iters as f64).cos()));
+                + 0.9
+                    * 0.5
+                    * (1.0 + (std::f64::consts::PI * it as f64 / opts.iters as f64).lcos()));
         let (c1, c2) = (1.0 - b1.powi(it as i32 + 1), 1.0 - b2.powi(it as i32 + 1));
         for i in 0..x.len() {
             mo[i] = b1 * mo[i] + (1.0 - b1) * g[i];

@@ -10,6 +10,7 @@
 //! (Oᵢᵏ)⁻¹Oⱼᵏ moves with the parent, so a fixed-axis fit only holds in the canonical
 //! form used here. For a static parent both forms agree.)
 
+use crate::math::Libm;
 use glam::{DMat3, DMat4, DQuat, DVec3};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
@@ -177,7 +178,7 @@ pub(crate) fn project_angle(axis: DVec3, r: &DMat3) -> f64 {
     };
     let alpha = frob(&k, r);
     let beta = frob(&k2, r);
-    alpha.atan2(-beta)
+    alpha.latan2(-beta)
 }
 
 /// Angles in (−π, π] made continuous from frame to frame (each within π of the one
@@ -413,7 +414,7 @@ pub fn point_rms(
 /// Angle between two axes up to sign, in degrees.
 pub fn axis_angle_deg(a: DVec3, b: DVec3) -> f64 {
     let c = (a.normalize().dot(b.normalize())).abs().min(1.0);
-    c.acos().to_degrees()
+    c.lacos().to_degrees()
 }
 
 /// Distance from point `x` to the line through `p` with unit direction `d`.
@@ -533,7 +534,7 @@ mod tests {
         let mut rng = StdRng::seed_from_u64(3);
         let axis = DVec3::new(1.0, 1.0, 0.2).normalize();
         let pivot = DVec3::new(-0.2, 0.0, 0.4);
-        let states: Vec<f64> = (0..10).map(|k| 0.8 * (k as f64 * 0.7).sin()).collect();
+        let states: Vec<f64> = (0..10).map(|k| 0.8 * (k as f64 * 0.7).lsin()).collect();
         let rel = sequence(JointType::Revolute, axis, pivot, &states, &mut rng, 0.005);
         let f = fit_screw(&rel, body(pivot + axis * 0.3));
         assert_eq!(f.joint_type, JointType::Revolute);
@@ -545,7 +546,7 @@ mod tests {
         assert!(point_line_distance(f.pivot, pivot, axis) < 0.02);
         assert!(f.loss < 0.01);
 
-        let pstates: Vec<f64> = (0..10).map(|k| 0.2 * (k as f64 * 0.5).cos()).collect();
+        let pstates: Vec<f64> = (0..10).map(|k| 0.2 * (k as f64 * 0.5).lcos()).collect();
         let rel = sequence(JointType::Prismatic, axis, pivot, &pstates, &mut rng, 0.003);
         let f = fit_screw(&rel, body(pivot));
         assert_eq!(f.joint_type, JointType::Prismatic);
@@ -576,7 +577,7 @@ mod tests {
         };
         let slide: Vec<DMat4> = (0..10)
             .map(|k| {
-                let q = 0.1 * (k as f64 * 0.6).sin();
+                let q = 0.1 * (k as f64 * 0.6).lsin();
                 screw_exp(JointType::Prismatic, DVec3::Y, DVec3::ZERO, q) * wobble()
             })
             .collect();
@@ -587,7 +588,7 @@ mod tests {
 
         let hinge: Vec<DMat4> = (0..10)
             .map(|k| {
-                let q = 1.2 * (k as f64 * 0.6).sin();
+                let q = 1.2 * (k as f64 * 0.6).lsin();
                 let pivot = c + DVec3::X * 0.05;
                 screw_exp(JointType::Revolute, DVec3::Z, pivot, q) * wobble()
             })

@@ -20,6 +20,7 @@
 //! their motion, their joints fitted again. `kinematics::build` then refines the model
 //! once more and keeps the change only if it still fits (`KEEP_SLACK`).
 
+use crate::math::Libm;
 use glam::{DMat3, DMat4, DVec3, Vec3};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
@@ -302,7 +303,7 @@ fn spin_free(
         .iter()
         .map(|d| {
             let d = d - d.dot(axis) * axis;
-            u.cross(d).dot(axis).atan2(u.dot(d))
+            u.cross(d).dot(axis).latan2(u.dot(d))
         })
         .collect();
     let mut states = unwrap_angles(states);
@@ -350,7 +351,7 @@ mod tests {
         for _ in 0..500 {
             let a = rng.random::<f32>() * std::f32::consts::TAU;
             let z = 0.12 + rng.random::<f32>() * 0.45;
-            pts.push(Vec3::new(0.03 * a.cos(), 0.03 * a.sin(), z));
+            pts.push(Vec3::new(0.03 * a.lcos(), 0.03 * a.lsin(), z));
             labels.push(1);
         }
         (pts, labels)
@@ -367,8 +368,8 @@ mod tests {
         let mut frames = frames;
         frames[0] = pts;
         let b = tilt.to_radians();
-        let axis = DVec3::new(0.0, b.cos(), b.sin());
-        let state: Vec<f64> = STATES.iter().map(|s| s / b.cos()).collect();
+        let axis = DVec3::new(0.0, b.lcos(), b.lsin());
+        let state: Vec<f64> = STATES.iter().map(|s| s / b.lcos()).collect();
         let poses = state
             .iter()
             .map(|&q| {
@@ -462,7 +463,7 @@ mod tests {
             .iter()
             .enumerate()
             .map(|(i, &q)| {
-                let spin = DMat4::from_rotation_z(0.7 * (i as f64).sin());
+                let spin = DMat4::from_rotation_z(0.7 * (i as f64).lsin());
                 turn(DVec3::Y, q, pivot) * spin
             })
             .collect();

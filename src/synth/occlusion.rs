@@ -352,6 +352,7 @@ pub fn zbuffer(points: &[DVec3], camera: DVec3) -> Vec<bool> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::Libm;
     use rand::{rngs::StdRng, Rng, SeedableRng};
 
     fn random_ball(n: usize, seed: u64) -> Vec<DVec3> {
@@ -505,7 +506,7 @@ mod tests {
                 let z: f64 = rng.random::<f64>() * 2.0 - 1.0;
                 let phi = rng.random::<f64>() * std::f64::consts::TAU;
                 let s = (1.0 - z * z).sqrt();
-                DVec3::new(s * phi.cos(), s * phi.sin(), z) * 0.4
+                DVec3::new(s * phi.lcos(), s * phi.lsin(), z) * 0.4
             })
             .collect();
         let cam = DVec3::new(0.0, 0.0, 2.0);

@@ -3,6 +3,7 @@
 //! temporary folders.
 #![allow(dead_code)]
 
+use gsart::math::Libm;
 use std::path::PathBuf;
 
 use glam::Vec3;
@@ -105,9 +106,9 @@ pub fn blob(n: usize) -> Vec<Vec3> {
         .map(|i| {
             let f = i as f32;
             Vec3::new(
-                (f * 0.37).sin(),
-                (f * 0.71).cos() * 0.8,
-                (f * 1.13).sin() * 0.5 + f * 1e-3,
+                (f * 0.37).lsin(),
+                (f * 0.71).lcos() * 0.8,
+                (f * 1.13).lsin() * 0.5 + f * 1e-3,
             )
         })
         .collect()

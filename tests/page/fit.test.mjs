@@ -2,8 +2,9 @@
 // live Gaussians), results (tree, joints, metrics), a slider re-poses the model,
 // exports (JSON, PLY zip, URDF), and the exported JSON opens again (file and ?model=URL).
 // Also: cancelling a fit leaves the page usable with the frames loaded, fast tries
-// every part count on occluded frames (the core's rule), and fast tries one part count
-// above the range when the top of it fails, with the CLI's result.
+// every part count on occluded frames (the core's rule), fast tries one part count
+// above the range when the top of it fails, and the page's results equal the CLI's bit
+// for bit (talos full, so101 occluded).
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import fs from 'node:fs';
@@ -231,40 +232,52 @@ test('fast tries every part count on occluded frames, the two ends on full ones'
 });
 
 const TALOS = benchDev() && path.join(benchDev(), 'full', 'talos_00');
-// The CLI the native tests built (same core), for the native side of the comparison.
+// The CLI the native tests built (same core), for the native side of the comparisons.
 const CLI = ['release', 'debug'].map((p) => path.join(ROOT, 'target', p, 'gsart')).find((p) => fs.existsSync(p));
+const NO_CLI = !CLI && 'the gsart CLI is not built';
 
-test('fast tries one more part count when the top of the range fails, as the CLI does', { timeout: FIT_TIMEOUT, skip: (!TALOS && 'bench-dev not found') || (!CLI && 'the gsart CLI is not built') }, async () => {
-  // Talos, fit seed 0: m = 15 ends 3× above m = 10's final Chamfer, so m = 20 is tried.
-  const native = path.join(ARTIFACTS, 'talos-native.json');
-  execFileSync(CLI, ['fit', TALOS, '--out', native, '--quality', 'fast', '--seed', '0', '--quiet'], { stdio: 'ignore' });
+// `gsart fit DIR --quality fast --seed 0`, then the same frames fitted in the page with
+// fast and the automatic range (`during(page)` runs while the page fits); both results.
+async function cliAndPage(dir, name, during = async () => {}) {
+  const native = path.join(ARTIFACTS, `${name}-native.json`);
+  execFileSync(CLI, ['fit', dir, '--out', native, '--quality', 'fast', '--seed', '0', '--quiet'], { stdio: 'ignore' });
   const want = JSON.parse(fs.readFileSync(native, 'utf8'));
-  assert.deepEqual(want.info.candidates.map((c) => c[0]), [10, 15, 20]);
-
   const { page, errors, context } = await newPage(browser);
   await page.goto(`${srv.base}/`);
   await waitLoaded(page);
   await page.locator('label:has(input[value=fast])').click();
-  const files = fs.readdirSync(TALOS).filter((f) => /^frame_\d+\.ply$/.test(f)).map((f) => path.join(TALOS, f));
+  const files = fs.readdirSync(dir).filter((f) => /^frame_\d+\.ply$/.test(f)).map((f) => path.join(dir, f));
   await page.locator('#file-input').setInputFiles(files);
   await page.waitForFunction((n) => document.querySelectorAll('#frame-list li[data-index]').length === n, files.length);
   await page.locator('#btn-fit').click();
-  await page.waitForFunction(() => /m = 15 fitted worse than m = 10 .*: trying m = 20 too/.test(document.querySelector('#fit-status').innerText),
-    null, { timeout: FIT_TIMEOUT });
+  await during(page);
   await page.waitForSelector('#explore:not([hidden])', { timeout: FIT_TIMEOUT });
-  assert.match(await page.locator('#fit-status').innerText(), /Step 1: m = 10 \(.*\), 15 \(.*\), 20 \(/);
+  const status = await page.locator('#fit-status').innerText();
   const got = JSON.parse(fs.readFileSync(await download(page, '#btn-export-json'), 'utf8'));
-  assert.deepEqual(got.info.candidates, want.info.candidates, 'the same candidates and final Chamfers');
-  assert.equal(got.info.m, want.info.m);
-  assert.equal(got.parts, want.parts);
-  assert.deepEqual(got.tree, want.tree, 'the same kinematic tree as the CLI');
-  // Step 1 is bit for bit the CLI's (the candidates' Chamfers above); Steps 2–3 run the
-  // same code in f64, whose transcendental functions differ in the last bits between
-  // wasm and the native platform, and on this 14-part model that moves a few points.
-  let same = 0, all = 0;
-  got.labels.forEach((f, k) => f.forEach((l, i) => { all++; if (l === want.labels[k][i]) same++; }));
-  assert.ok(same / all > 0.98, `labels as the CLI's: ${(100 * same / all).toFixed(2)} % of the points`);
-  assert.ok(got.info.notes.some((n) => /so m = 20 was tried too/.test(n)), 'the notes say why m = 20 was tried');
   assert.deepEqual(errors, []);
   await context.close();
+  // The whole pipeline gives the CLI's bits: every transcendental function comes from
+  // the same pure-Rust libm natively and in wasm (`crate::math`).
+  assert.deepEqual(got.info.candidates, want.info.candidates, 'the same candidates and final Chamfers');
+  assert.equal(got.info.m, want.info.m);
+  assert.deepEqual(got.tree, want.tree, 'the same kinematic tree as the CLI');
+  assert.deepEqual(got.poses, want.poses, 'the same poses as the CLI');
+  assert.deepEqual(got.labels, want.labels, 'the same labels as the CLI');
+  return { got, want, status };
+}
+
+test('fast tries one more part count when the top of the range fails, as the CLI does', { timeout: FIT_TIMEOUT, skip: (!TALOS && 'bench-dev not found') || NO_CLI }, async () => {
+  // Talos, fit seed 0: m = 15 ends 3× above m = 10's final Chamfer, so m = 20 is tried.
+  const { got, status } = await cliAndPage(TALOS, 'talos', (page) => page.waitForFunction(
+    () => /m = 15 fitted worse than m = 10 .*: trying m = 20 too/.test(document.querySelector('#fit-status').innerText),
+    null, { timeout: FIT_TIMEOUT }));
+  assert.deepEqual(got.info.candidates.map((c) => c[0]), [10, 15, 20]);
+  assert.match(status, /Step 1: m = 10 \(.*\), 15 \(.*\), 20 \(/);
+  assert.ok(got.info.notes.some((n) => /so m = 20 was tried too/.test(n)), 'the notes say why m = 20 was tried');
+});
+
+test('an occluded fit in the page gives the CLI result bit for bit', { timeout: FIT_TIMEOUT, skip: (!OCCLUDED && 'bench-dev not found') || NO_CLI }, async () => {
+  // Occluded input is the most sensitive path (the pose search's decisions): so101.
+  const { got } = await cliAndPage(OCCLUDED, 'so101-occluded');
+  assert.deepEqual(got.info.candidates.map((c) => c[0]), [10, 11, 12, 13, 14, 15]);
 });

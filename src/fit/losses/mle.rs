@@ -1,6 +1,7 @@
 //! L_MLE = −mean_n log Σ_i G_i(x_n): negative log-likelihood of the points under an
 //! equal-weight mixture of the frame's normalised Gaussians (log-sum-exp).
 
+use crate::math::Libm;
 use glam::DVec3;
 
 use crate::fit::gaussians::{Gauss, GradAcc};
@@ -32,10 +33,10 @@ pub fn mle(
         }
         let mut s = 0.0;
         for e in scratch.iter_mut() {
-            e.0 = (e.0 - mx).exp();
+            e.0 = (e.0 - mx).lexp();
             s += e.0;
         }
-        total -= mx + s.ln();
+        total -= mx + s.lln();
         if let Some(acc) = acc.as_deref_mut() {
             for (i, &(e, y)) in scratch.iter().enumerate() {
                 let r = e / s * inv_n;

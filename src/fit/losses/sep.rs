@@ -2,6 +2,7 @@
 //! models one rigid part (hard min, gradient through the minimising pair).
 
 use crate::fit::gaussians::{Gauss, GradAcc};
+use crate::math::Libm;
 
 /// Loss at frame k weighted by `w`; gradient into `acc` when given.
 pub fn sep(gs: &[Gauss], k: usize, alpha: f64, w: f64, mut acc: Option<&mut GradAcc>) -> f64 {
@@ -21,7 +22,7 @@ pub fn sep(gs: &[Gauss], k: usize, alpha: f64, w: f64, mut acc: Option<&mut Grad
             }
         }
         let (j, d) = best;
-        let e = (-alpha * d).exp() * w / m as f64;
+        let e = (-alpha * d).lexp() * w / m as f64;
         total += e;
         if let Some(acc) = acc.as_deref_mut() {
             let (_, y) = gs[i].maha(gs[j].mu);
