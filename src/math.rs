@@ -14,13 +14,11 @@ pub trait Libm: Sized {
     fn latan2(self, x: Self) -> Self;
     fn lexp(self) -> Self;
     fn lln(self) -> Self;
-    fn lpowf(self, e: Self) -> Self;
     fn lcbrt(self) -> Self;
-    fn lhypot(self, o: Self) -> Self;
 }
 
 macro_rules! libm_impl {
-    ($t:ty, $sin:ident, $cos:ident, $tan:ident, $asin:ident, $acos:ident, $atan:ident, $atan2:ident, $exp:ident, $ln:ident, $pow:ident, $cbrt:ident, $hypot:ident) => {
+    ($t:ty, $sin:ident, $cos:ident, $tan:ident, $asin:ident, $acos:ident, $atan:ident, $atan2:ident, $exp:ident, $ln:ident, $cbrt:ident) => {
         impl Libm for $t {
             #[inline]
             fn lsin(self) -> Self {
@@ -63,19 +61,11 @@ macro_rules! libm_impl {
                 libm::$ln(self)
             }
             #[inline]
-            fn lpowf(self, e: Self) -> Self {
-                libm::$pow(self, e)
-            }
-            #[inline]
             fn lcbrt(self) -> Self {
                 libm::$cbrt(self)
-            }
-            #[inline]
-            fn lhypot(self, o: Self) -> Self {
-                libm::$hypot(self, o)
             }
         }
     };
 }
-libm_impl!(f64, sin, cos, tan, asin, acos, atan, atan2, exp, log, pow, cbrt, hypot);
-libm_impl!(f32, sinf, cosf, tanf, asinf, acosf, atanf, atan2f, expf, logf, powf, cbrtf, hypotf);
+libm_impl!(f64, sin, cos, tan, asin, acos, atan, atan2, exp, log, cbrt);
+libm_impl!(f32, sinf, cosf, tanf, asinf, acosf, atanf, atan2f, expf, logf, cbrtf);

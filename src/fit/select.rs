@@ -633,19 +633,21 @@ pub fn select_all(
     if results.is_empty() {
         return Err(Error::InvalidArgument("no candidate part count".into()));
     }
-    let fitted: Vec<(usize, f64)> = results.iter().map(|r| (r.m, r.final_chamfer)).collect();
-    if let Some(up) = extra_candidate(&fitted, opts.quality, prep.occluded, opts.parts.is_none()) {
+    let mut cands: Vec<(usize, f64)> = results.iter().map(|r| (r.m, r.final_chamfer)).collect();
+    if let Some(up) = extra_candidate(&cands, opts.quality, prep.occluded, opts.parts.is_none()) {
         // Beyond the range asked for, a fit that cannot run (frames with fewer than `up`
         // points) leaves the range's candidates as they are; a cancel still cancels.
         for r in run_all(&prep, &[up], opts, cb) {
             match r {
-                Ok(r) => results.push(r),
+                Ok(r) => {
+                    cands.push((r.m, r.final_chamfer));
+                    results.push(r);
+                }
                 Err(Error::Cancelled) => return Err(Error::Cancelled),
                 Err(_) => {}
             }
         }
     }
-    let cands: Vec<(usize, f64)> = results.iter().map(|r| (r.m, r.final_chamfer)).collect();
     let per: Vec<(usize, f64, usize)> = results
         .iter()
         .flat_map(|r| r.timings.per_candidate.iter().copied())

@@ -24,21 +24,13 @@ use serde_json::{json, Value};
 use crate::geom::se3::to_nested;
 use crate::io::gt::{GroundTruth, GtJoint, JointType};
 use crate::io::sequence::{Frame, Sequence};
+use crate::math::Libm;
 use objects::ObjectModel;
 
-/// Trigonometry from the pure-Rust `libm`, so generated sequences are bit-identical
-/// natively and in wasm (std's `sin`/`cos` call the platform's math library).
-pub(crate) fn sin(x: f64) -> f64 {
-    libm::sin(x)
-}
-
-pub(crate) fn cos(x: f64) -> f64 {
-    libm::cos(x)
-}
-
-/// Rotation by `angle` about the unit `axis` (platform-independent, see [`sin`]).
+/// Rotation by `angle` about the unit `axis` (trigonometry from `crate::math`, so
+/// generated sequences are bit-identical natively and in wasm).
 pub(crate) fn axis_angle(axis: DVec3, angle: f64) -> glam::DQuat {
-    let (s, c) = (sin(angle * 0.5), cos(angle * 0.5));
+    let (s, c) = ((angle * 0.5).lsin(), (angle * 0.5).lcos());
     glam::DQuat::from_xyzw(axis.x * s, axis.y * s, axis.z * s, c)
 }
 
@@ -465,7 +457,7 @@ pub fn generate(opts: &SynthOptions) -> crate::Result<SynthOutput> {
         let el = trajectory::smooth_states(&mut cam_rng, k, (-0.25, 0.85));
         for (t, frame) in frames.iter_mut().enumerate() {
             let (a, e) = (az0 + az[t], el[t]);
-            let cam = DVec3::new(cos(e) * cos(a), cos(e) * sin(a), sin(e)) * 2.0;
+            let cam = DVec3::new(e.lcos() * a.lcos(), e.lcos() * a.lsin(), e.lsin()) * 2.0;
             let pts: Vec<DVec3> = frame.points.iter().map(|p| p.as_dvec3()).collect();
             let (mask, m) = occlusion::visible(&pts, cam);
             // Report the weaker method if any frame needed the fallback.

@@ -7,7 +7,7 @@ use glam::{DQuat, DVec3};
 use rand::Rng;
 use std::f64::consts::PI;
 
-use super::{cos, sin};
+use crate::math::Libm;
 
 /// One closed surface in a part's local frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -74,7 +74,7 @@ fn unit_dir(rng: &mut impl Rng) -> DVec3 {
     let z: f64 = rng.random::<f64>() * 2.0 - 1.0;
     let phi = rng.random::<f64>() * 2.0 * PI;
     let s = (1.0 - z * z).max(0.0).sqrt();
-    DVec3::new(s * cos(phi), s * sin(phi), z)
+    DVec3::new(s * phi.lcos(), s * phi.lsin(), z)
 }
 
 impl Primitive {
@@ -120,7 +120,7 @@ impl Primitive {
                     let (e1, e2) = axis.any_orthonormal_pair();
                     let t = rng.random::<f64>();
                     let phi = rng.random::<f64>() * 2.0 * PI;
-                    a + (b - a) * t + (e1 * cos(phi) + e2 * sin(phi)) * r
+                    a + (b - a) * t + (e1 * phi.lcos() + e2 * phi.lsin()) * r
                 } else {
                     // A uniform direction split by hemisphere gives both caps uniformly.
                     let d = unit_dir(rng);
@@ -135,7 +135,7 @@ impl Primitive {
                 let axis = if len > 0.0 { (b - a) / len } else { DVec3::Z };
                 let (e1, e2) = axis.any_orthonormal_pair();
                 let phi = rng.random::<f64>() * 2.0 * PI;
-                let radial = e1 * cos(phi) + e2 * sin(phi);
+                let radial = e1 * phi.lcos() + e2 * phi.lsin();
                 if rng.random::<f64>() * (side + caps) < side {
                     a + (b - a) * rng.random::<f64>() + radial * r
                 } else {

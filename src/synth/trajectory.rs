@@ -3,6 +3,7 @@
 //! monotone, so it never leaves the joint's range; every joint is made to move over a
 //! visible part of its range.
 
+use crate::math::Libm;
 use rand::Rng;
 
 /// Share of a joint's range that its trajectory must cover over the sequence.
@@ -41,7 +42,7 @@ pub fn smooth_states(rng: &mut impl Rng, frames: usize, range: (f64, f64)) -> Ve
             let x = t as f64 / seg;
             let i = (x.floor() as usize).min(knots - 2);
             let f = (x - i as f64).clamp(0.0, 1.0);
-            let w = 0.5 - 0.5 * super::cos(std::f64::consts::PI * f);
+            let w = 0.5 - 0.5 * (std::f64::consts::PI * f).lcos();
             (values[i] * (1.0 - w) + values[i + 1] * w).clamp(lo, hi)
         })
         .collect()
