@@ -5,6 +5,13 @@
 use crate::math::Libm;
 use serde::{Deserialize, Serialize};
 
+/// Covariance floor of `kinematics::frame_gmm` in squared fit units (a standard
+/// deviation of 0.3 % of the object's size).
+const FRAME_GMM_FLOOR: f64 = 1e-5;
+/// Most rounds of `kinematics::frame_gmm`, a bound on its cost (a round is one pass
+/// over a frame's points and the Gaussians); most frames settle before it.
+const FRAME_GMM_ROUNDS: usize = 30;
+
 /// Occlusion handling (partial / occluded input losses of the supplement).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
 #[serde(rename_all = "lowercase")]
@@ -398,9 +405,26 @@ pub fn finish(
                 .filter(|_| t != canonical)
                 .unwrap_or(&step1.model)
                 .segment(t, &f.points)
-                .into_iter()
-                .map(part_of)
-                .collect()
+        })
+        .collect::<Vec<Vec<u32>>>()
+        .into_iter()
+        .enumerate()
+        .map(|(t, mut g)| {
+            // On occluded input the segmenting copy's Gaussians are posed from a search
+            // that is often far off, so each frame's Gaussian labels are refined on that
+            // frame's points alone (`kinematics::frame_gmm`). Not the canonical frame's:
+            // its labels decide which pose moves each point, so they stay those of the
+            // posed model.
+            if step1.occlusion_used && t != canonical {
+                crate::kinematics::frame_gmm::refine_labels(
+                    &seq.frames[t].points,
+                    &mut g,
+                    m,
+                    FRAME_GMM_FLOOR * norm.scale * norm.scale,
+                    FRAME_GMM_ROUNDS,
+                );
+            }
+            g.into_iter().map(part_of).collect()
         })
         .collect();
     // On full input, points go to the part whose fitted motion carries them onto the

@@ -5,6 +5,7 @@ pub mod build;
 pub mod chain;
 pub mod coverage;
 pub mod flips;
+pub mod frame_gmm;
 pub mod joint_sweep;
 pub mod merge;
 pub mod observed;
