@@ -1109,15 +1109,19 @@ mod size_rule_tests {
             }
         }
         // Steps 2–3 take it as the canonical frame. Its points are labelled by the
-        // posed model, the other frames' by the segmenting copy.
+        // posed model, the other frames' by the segmenting copy, refined on each
+        // frame's points (`kinematics::frame_gmm`).
         let (model, seg) = (r.model.clone(), r.segmenter.clone().expect("a segmenter"));
+        let m = model.m;
         let out = crate::pipeline::finish(&seq, r, &|| 0.0, &mut |_| Control::Continue).unwrap();
         let res = &out.result;
         assert_eq!(res.canonical_frame, 2);
         for (k, f) in seq.frames.iter().enumerate() {
-            let by = if k == 2 { &model } else { &seg };
-            let want: Vec<u32> = by
-                .segment(k, &f.points)
+            let mut want = if k == 2 { &model } else { &seg }.segment(k, &f.points);
+            if k != 2 {
+                crate::pipeline::refine_frame_labels(&f.points, &mut want, m);
+            }
+            let want: Vec<u32> = want
                 .into_iter()
                 .map(|g| out.kin.merge_map[g as usize])
                 .collect();
