@@ -1,25 +1,26 @@
 //! Per-frame labels on occluded input, refined by classification EM.
 //!
-//! On occluded input each frame shows one side of every part, and the Gaussians that
-//! label it (Step 1's segmenting copy, `fit::select::SEGMENT_ITERS`) are posed from
-//! the motion search, which is often far off there (tens of degrees). Their labels
-//! follow the parts roughly but cut them in the wrong places. Here a frame's Gaussian
-//! labels are the start of a hard (classification) EM of a Gaussian mixture on that
-//! frame's points alone: each Gaussian gets the mean, covariance and share of the
-//! points it holds, every point goes to the Gaussian under which it is most likely,
-//! and this repeats until no label changes. The Gaussians then fit the side the frame
-//! shows. It only moves boundaries between Gaussians the frame already has, so it
-//! cannot find a part the labels missed.
+//! On occluded input each frame shows one side of every part, and Step 1's Gaussians
+//! are posed from the motion search, which is often far off there (tens of degrees),
+//! and move rigidly: in a frame that shows another side of a part they sit where the
+//! part is, not on its visible points. Their labels follow the parts roughly but cut
+//! them in the wrong places. Here a frame's Gaussian labels are the start of a hard
+//! (classification) EM of a Gaussian mixture on that frame's points alone: each
+//! Gaussian gets the mean, covariance and share of the points it holds, every point
+//! goes to the Gaussian under which it is most likely, and this repeats until no label
+//! changes. The Gaussians then fit the side the frame shows. It only moves boundaries
+//! between Gaussians the frame already has, so it cannot find a part the labels
+//! missed.
 //!
-//! Measured (bench-dev occluded, fast, seeds 0–4; `gsart synth NAME --occluded`,
-//! generator seeds 0–3, fast), mean RI before → after:
-//! - with the Gaussians (this): bench-dev 0.769 → 0.784, panda_gripper 0.790 → 0.826,
-//!   no robot lower by more than 0.001; procedural 0.722 → 0.729, the cabinet 0.719 →
-//!   0.712;
-//! - with one Gaussian per merged part instead: bench-dev 0.769 → 0.799, but
-//!   panda_gripper 0.790 → 0.710 and the procedural cabinet 0.719 → 0.601: one
-//!   Gaussian cannot model a hollow box or a hand plate, and a spurious extra part on
-//!   it grows over half of it. Not kept.
+//! Measured (bench-dev occluded, mean RI; `gsart synth NAME --occluded`, generator
+//! seeds 0–3, fast), against session 37's labels from a copy of the Gaussians that
+//! went on for 1100 iterations to follow each frame's points (now removed): fast,
+//! seeds 0–4, 0.769 → 0.784; balanced, seeds 0–2, 0.807 → 0.824; procedural 0.722 →
+//! 0.733. Starting from the copy's labels instead gave 0.784, 0.818 and 0.729.
+//! With one Gaussian per merged part (from the copy's labels) bench-dev fast gained
+//! more (0.799), but panda_gripper fell 0.790 → 0.710 and the procedural cabinet 0.719
+//! → 0.601: one Gaussian cannot model a hollow box or a hand plate, and a spurious
+//! extra part on it grows over half of it. Not kept.
 //!
 //! On full input, where the labels come from motions that fit, a per-frame mixture
 //! cuts parts by shape instead of motion (one Gaussian per part, a prototype: bench-dev
@@ -40,7 +41,7 @@ struct Component {
     offset: f64,
 }
 
-/// Refines `labels` (one per point of `points`, each `< parts` components) in place by
+/// Refines `labels` (one per point of `points`, each below `components`) in place by
 /// classification EM (module docs): at most `max_iters` rounds, stopping when no label
 /// changes. `floor` is added to every covariance's diagonal (squared input units), so
 /// a flat or tiny component stays a proper Gaussian. Returns the rounds that changed
@@ -48,18 +49,18 @@ struct Component {
 pub fn refine_labels(
     points: &[Vec3],
     labels: &mut [u32],
-    parts: usize,
+    components: usize,
     floor: f64,
     max_iters: usize,
 ) -> usize {
-    if points.len() != labels.len() || parts < 2 {
+    if points.len() != labels.len() || components < 2 {
         return 0;
     }
-    let mut comps: Vec<Option<Component>> = Vec::with_capacity(parts);
-    let mut sums = vec![(DVec3::ZERO, DMat3::ZERO, 0usize); parts];
+    let mut comps: Vec<Option<Component>> = Vec::with_capacity(components);
+    let mut sums = vec![(DVec3::ZERO, DMat3::ZERO, 0usize); components];
     let mut rounds = 0;
     for _ in 0..max_iters {
-        // M-step: each part's mean, covariance and share.
+        // M-step: each component's mean, covariance and share.
         sums.iter_mut()
             .for_each(|s| *s = (DVec3::ZERO, DMat3::ZERO, 0));
         for (x, &l) in points.iter().zip(labels.iter()) {
@@ -90,7 +91,7 @@ pub fn refine_labels(
         if comps.iter().all(Option::is_none) {
             break;
         }
-        // E-step (hard): every point to its most likely part.
+        // E-step (hard): every point to its most likely component.
         let mut changed = false;
         for (x, l) in points.iter().zip(labels.iter_mut()) {
             let x = x.as_dvec3();
@@ -188,8 +189,8 @@ mod tests {
     #[test]
     fn with_a_floor_of_the_spacing_no_gaussian_shrinks_to_a_row_of_points() {
         // A flat strip, 40 columns × 12 rows, its middle columns 20–28 held by the
-        // second Gaussian (so the segmenting copy left frame 0 of
-        // `select`'s bent-strip test): nothing in the shape says where to cut.
+        // second Gaussian (as Step 1 once left frame 0 of `select`'s bent-strip
+        // test): nothing in the shape says where to cut.
         let pts: Vec<Vec3> = (0..480)
             .map(|i| Vec3::new((i % 40) as f32 * 0.025, (i / 40) as f32 * 0.02, 0.0))
             .collect();
