@@ -9,9 +9,8 @@ use serde::{Deserialize, Serialize};
 /// (a standard deviation of half a spacing): no Gaussian gets thinner than the
 /// sampling, which a single row of points would otherwise be (with a floor of 1e-5
 /// squared fit units a flat strip's second Gaussian ended as one row of points).
-/// Bench-dev occluded (fast, seeds 0–4; with session 37's segmenting copy) mean RI
-/// 0.783 with that fixed floor, 0.784 at 0.25 spacings², 0.785 at 1; procedural
-/// occluded 0.730, 0.729, 0.727.
+/// Bench-dev occluded (fast, seeds 0–4) mean RI 0.783 with that fixed floor, 0.784 at
+/// 0.25 spacings², 0.785 at 1; procedural occluded 0.730, 0.729, 0.727.
 const FRAME_GMM_FLOOR_SPACINGS: f64 = 0.25;
 /// Most rounds of `kinematics::frame_gmm`, a bound on its cost (a round is one pass
 /// over a frame's points and the Gaussians); most frames settle before it.
@@ -407,22 +406,34 @@ pub fn finish(
     norm.result_to_input(&mut result);
 
     // Every input point gets a part: segment the full frames with the Gaussians, then
-    // map Gaussians to merged parts.
+    // map Gaussians to merged parts. On occluded input the frames other than the
+    // canonical one are segmented by Step 1's `segmenter` (`select::SEGMENT_ITERS`):
+    // the canonical frame's labels decide which pose moves each of its points, so
+    // they stay those of the posed model.
     let part_of = |g: u32| kin.merge_map.get(g as usize).copied().unwrap_or(0);
     result.labels = seq
         .frames
         .iter()
         .enumerate()
         .map(|(t, f)| {
-            let mut g = step1.model.segment(t, &f.points);
-            // On occluded input the Gaussians are posed from a search that is often
-            // far off, and they move rigidly: in a frame that shows another side of a
-            // part they sit where the part is, not on its visible points. So each
-            // frame's Gaussian labels are refined on that frame's points alone
-            // (`kinematics::frame_gmm`). Not the canonical frame's: its labels decide
-            // which pose moves each point, so they stay those of the posed model.
+            step1
+                .segmenter
+                .as_ref()
+                .filter(|_| t != canonical)
+                .unwrap_or(&step1.model)
+                .segment(t, &f.points)
+        })
+        .collect::<Vec<Vec<u32>>>()
+        .into_iter()
+        .enumerate()
+        .map(|(t, mut g)| {
+            // On occluded input the segmenting copy's Gaussians are posed from a search
+            // that is often far off, so each frame's Gaussian labels are refined on that
+            // frame's points alone (`kinematics::frame_gmm`). Not the canonical frame's:
+            // its labels decide which pose moves each point, so they stay those of the
+            // posed model.
             if step1.occlusion_used && t != canonical {
-                refine_frame_labels(&f.points, &mut g, m);
+                refine_frame_labels(&seq.frames[t].points, &mut g, m);
             }
             g.into_iter().map(part_of).collect()
         })

@@ -112,6 +112,14 @@ pub struct FitConfig {
     /// (`motion_seg::resegment`, each followed by a new search); used only with
     /// `pose_search`. None = off.
     pub motion_seg: Option<MotionSegOpts>,
+    /// After the main loop, a copy of the Gaussians goes on for this many iterations
+    /// of the same losses at the preset's learning rate (`Schedule::lr`, not the
+    /// search's polishing rate); `fit_candidate_segmented` returns it as the model
+    /// that segments the frames, while the poses stay the main loop's. 0 = off. Meant
+    /// for occluded input (see `select`): there the searched, rigidly moving
+    /// Gaussians give the better part poses, but Gaussians that follow each frame's
+    /// visible points label them better.
+    pub segment_iters: usize,
 }
 
 impl FitConfig {
@@ -131,6 +139,7 @@ impl FitConfig {
             pose_init: Some(PoseInitOpts::default()),
             pose_search: Some(PoseSearchOpts::default()),
             motion_seg: Some(motion_seg),
+            segment_iters: 0,
             report_every: 10,
             snapshot_every: 50,
         }
@@ -574,6 +583,18 @@ pub fn fit_candidate(
     ff: Option<&FlowField>,
     cb: &mut dyn FnMut(&Progress) -> Control,
 ) -> Result<(Params, FitStats)> {
+    fit_candidate_segmented(data, m, cfg, ff, cb).map(|(p, _, s)| (p, s))
+}
+
+/// [`fit_candidate`], also returning the Gaussians that segment the frames when
+/// `cfg.segment_iters > 0` (see `FitConfig::segment_iters`).
+pub fn fit_candidate_segmented(
+    data: &Data,
+    m: usize,
+    cfg: &FitConfig,
+    ff: Option<&FlowField>,
+    cb: &mut dyn FnMut(&Progress) -> Control,
+) -> Result<(Params, Option<Params>, FitStats)> {
     let kk = data.k();
     if kk < 2 || m == 0 {
         return Err(Error::InvalidArgument(format!(
@@ -709,8 +730,8 @@ pub fn fit_candidate(
     // the search's `PoseSearchOpts::main_lr` (1e-4) with the EMD after a third. The
     // occluded search leaves poses much further off than the full-input one (mean pose
     // error 10.3 against 0.8 with Gaussians on the true parts), which a polish at 1e-4
-    // barely moves. Measured with the segmenting copy of sessions 29–37 labelling the
-    // frames (removed in session 38), bench-dev occluded RI / recon / flow / TED /
+    // barely moves. Measured with the segmenting copy
+    // (`select::SEGMENT_ITERS`), bench-dev occluded RI / recon / flow / TED /
     // re-animation: fast, seeds 0–4, 0.755 / 7.43 / 8.19 / 4.83 / 6.16 → 0.778 / 7.28 /
     // 7.89 / 4.54 / 5.57; balanced, seeds 0–2, 0.783 / 6.60 / 7.05 / 4.19 / 5.29 → 0.795 /
     // 6.61 / 7.24 / 3.95 / 4.86; procedural occluded (five objects, generator seeds 0–3,
@@ -733,8 +754,17 @@ pub fn fit_candidate(
     let mut lb = LossesB::default();
     let (mut lm, mut ls) = (0.0, 0.0);
     let mut terms = Terms::default();
-    let total = sched.iters;
+    let segment_iters = cfg.segment_iters;
+    let total = sched.iters + segment_iters;
+    // The segmenting phase switches to EMD at the preset's fraction of its length.
+    let segment_emd = segment_iters * sched.emd_start / sched.iters.max(1);
+    let mut posed: Option<Params> = None;
     for it in 0..total {
+        if it == sched.iters && segment_iters > 0 {
+            posed = Some(params.clone());
+            adam.reset();
+            adam.lr = sched.lr;
+        }
         if let (Some(o), false) = (&cfg.pose_init, cfg.occlusion) {
             if o.refine_every > 0 && it > 0 && it % o.refine_every == 0 {
                 pose_init::refine_poses(data, &mut params, o);
@@ -750,7 +780,11 @@ pub fn fit_candidate(
         adam.step(&mut params.x, &flat);
         // Step B.
         ws.eval_all(&params);
-        let use_emd = it >= sched.emd_start && !occluded_polish && cfg.weights.emd > 0.0;
+        let use_emd = if it >= sched.iters {
+            it - sched.iters >= segment_emd
+        } else {
+            it >= sched.emd_start && !occluded_polish
+        } && cfg.weights.emd > 0.0;
         plan.k = k;
         plan.use_cd = !use_emd && cfg.weights.cd > 0.0;
         plan.flow = ff.is_some() && cfg.weights.flow > 0.0;
@@ -854,6 +888,8 @@ pub fn fit_candidate(
         }
     }
     stats.last = named(lm, ls, &lb, terms);
+    // The main loop's Gaussians give the poses; the copy that went on segments.
+    let segmenter = posed.map(|p| std::mem::replace(&mut params, p));
     if let Some(o) = search {
         if o.snap_ratio > 0.0 {
             pose_search::snap_rigid(
@@ -866,7 +902,7 @@ pub fn fit_candidate(
             );
         }
     }
-    Ok((params, stats))
+    Ok((params, segmenter, stats))
 }
 
 /// Which transfer-step terms an iteration used.
@@ -1155,4 +1191,60 @@ fn track_init(
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Libm;
+    use crate::pipeline::{Control, Quality};
+
+    /// Frames of a strip whose half beyond x = 0.5 curls up more in every frame, each
+    /// frame seen from another side (only the points of some rows: one-sided views).
+    fn occluded_strip() -> Vec<Vec<Vec3>> {
+        (0..4)
+            .map(|k| {
+                (0..800)
+                    .filter(|i| (i / 40 + k) % 3 != 0)
+                    .map(|i| {
+                        let u = (i % 40) as f32 / 40.0;
+                        let v = (i / 40) as f32 * 0.02;
+                        let a = (u - 0.5).max(0.0) * k as f32 * 0.8;
+                        Vec3::new(
+                            u.min(0.5) + (u - 0.5).max(0.0) * a.lcos(),
+                            v,
+                            (u - 0.5).max(0.0) * a.lsin(),
+                        )
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    fn mle_over_frames(data: &Data, params: &Params) -> f64 {
+        let (mut gs, mut scratch) = (Vec::new(), Vec::new());
+        (0..data.k())
+            .map(|k| {
+                params.frame_into(k, &mut gs);
+                super::mle::mle(&gs, k, &data.frames[k], 1.0, None, &mut scratch)
+            })
+            .sum()
+    }
+
+    #[test]
+    fn the_segmenting_copy_goes_on_while_the_poses_stay_the_main_loops() {
+        let data = Data::new(occluded_strip());
+        let sched = Schedule::preset(Quality::Fast, false).with_iters(40);
+        let mut cfg = FitConfig::new(sched, true, 3);
+        let go = &mut |_: &Progress| Control::Continue;
+        let (plain, none, _) = fit_candidate_segmented(&data, 3, &cfg, None, go).unwrap();
+        assert!(none.is_none());
+        cfg.segment_iters = 200;
+        let (posed, seg, stats) = fit_candidate_segmented(&data, 3, &cfg, None, go).unwrap();
+        assert_eq!(posed.x, plain.x, "the main loop's Gaussians are unchanged");
+        assert_eq!(stats.iterations, 240);
+        let seg = seg.expect("a segmenting copy");
+        let (before, after) = (mle_over_frames(&data, &posed), mle_over_frames(&data, &seg));
+        assert!(after < before, "L_MLE over the frames {before} → {after}");
+    }
 }

@@ -57,4 +57,9 @@ pub struct Step1Result {
     /// input a root whose turn the clouds cannot see).
     pub held_still: usize,
     pub timings: Timings,
+    /// On occluded input, the Gaussians that label the input points of the frames
+    /// other than the canonical one in the result (`pipeline::finish`;
+    /// `select::SEGMENT_ITERS`). `model` gives the poses, `labels` and the canonical
+    /// frame's labels.
+    pub segmenter: Option<GaussianModel>,
 }

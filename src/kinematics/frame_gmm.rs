@@ -1,26 +1,30 @@
 //! Per-frame labels on occluded input, refined by classification EM.
 //!
-//! On occluded input each frame shows one side of every part, and Step 1's Gaussians
-//! are posed from the motion search, which is often far off there (tens of degrees),
-//! and move rigidly: in a frame that shows another side of a part they sit where the
-//! part is, not on its visible points. Their labels follow the parts roughly but cut
-//! them in the wrong places. Here a frame's Gaussian labels are the start of a hard
-//! (classification) EM of a Gaussian mixture on that frame's points alone: each
-//! Gaussian gets the mean, covariance and share of the points it holds, every point
-//! goes to the Gaussian under which it is most likely, and this repeats until no label
-//! changes. The Gaussians then fit the side the frame shows. It only moves boundaries
-//! between Gaussians the frame already has, so it cannot find a part the labels
-//! missed.
+//! On occluded input each frame shows one side of every part, and the Gaussians that
+//! label it (Step 1's segmenting copy, `fit::select::SEGMENT_ITERS`) are posed from
+//! the motion search, which is often far off there (tens of degrees). Their labels
+//! follow the parts roughly but cut them in the wrong places. Here a frame's Gaussian
+//! labels are the start of a hard (classification) EM of a Gaussian mixture on that
+//! frame's points alone: each Gaussian gets the mean, covariance and share of the
+//! points it holds, every point goes to the Gaussian under which it is most likely,
+//! and this repeats until no label changes. The Gaussians then fit the side the frame
+//! shows. It only moves boundaries between Gaussians the frame already has, so it
+//! cannot find a part the labels missed.
 //!
-//! Measured (bench-dev occluded, mean RI; `gsart synth NAME --occluded`, generator
-//! seeds 0–3, fast), against session 37's labels from a copy of the Gaussians that
-//! went on for 1100 iterations to follow each frame's points (now removed): fast,
-//! seeds 0–4, 0.769 → 0.784; balanced, seeds 0–2, 0.807 → 0.824; procedural 0.722 →
-//! 0.733. Starting from the copy's labels instead gave 0.784, 0.818 and 0.729.
-//! With one Gaussian per merged part (from the copy's labels) bench-dev fast gained
-//! more (0.799), but panda_gripper fell 0.790 → 0.710 and the procedural cabinet 0.719
-//! → 0.601: one Gaussian cannot model a hollow box or a hand plate, and a spurious
-//! extra part on it grows over half of it. Not kept.
+//! Measured (bench-dev occluded, fast, seeds 0–4; `gsart synth NAME --occluded`,
+//! generator seeds 0–3, fast), mean RI before → after:
+//! - with the Gaussians (this): bench-dev 0.769 → 0.784, panda_gripper 0.790 → 0.826,
+//!   no robot lower by more than 0.001; procedural 0.722 → 0.729, the cabinet 0.719 →
+//!   0.712;
+//! - with one Gaussian per merged part instead: bench-dev 0.769 → 0.799, but
+//!   panda_gripper 0.790 → 0.710 and the procedural cabinet 0.719 → 0.601: one
+//!   Gaussian cannot model a hollow box or a hand plate, and a spurious extra part on
+//!   it grows over half of it. Not kept.
+//! - from the polished Gaussians' own labels, without the copy (1100 fewer iterations
+//!   a candidate, Step 1 0.5–1.1 s faster a sequence): bench-dev fast 0.784 as well,
+//!   balanced (seeds 0–2) 0.824 against 0.818, procedural 0.733, but partial (fast,
+//!   seeds 0–1) 0.795 against 0.805, solo12 partial 0.766 → 0.694 and occluded 0.673 →
+//!   0.663. Not kept: the copy's labels are the safer start.
 //!
 //! On full input, where the labels come from motions that fit, a per-frame mixture
 //! cuts parts by shape instead of motion (one Gaussian per part, a prototype: bench-dev
@@ -189,8 +193,8 @@ mod tests {
     #[test]
     fn with_a_floor_of_the_spacing_no_gaussian_shrinks_to_a_row_of_points() {
         // A flat strip, 40 columns × 12 rows, its middle columns 20–28 held by the
-        // second Gaussian (as Step 1 once left frame 0 of `select`'s bent-strip
-        // test): nothing in the shape says where to cut.
+        // second Gaussian (so the segmenting copy left frame 0 of
+        // `select`'s bent-strip test): nothing in the shape says where to cut.
         let pts: Vec<Vec3> = (0..480)
             .map(|i| Vec3::new((i % 40) as f32 * 0.025, (i / 40) as f32 * 0.02, 0.0))
             .collect();
