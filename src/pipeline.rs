@@ -5,30 +5,6 @@
 use crate::math::Libm;
 use serde::{Deserialize, Serialize};
 
-/// Covariance floor of `kinematics::frame_gmm`, in squared point spacings of the frame
-/// (a standard deviation of half a spacing): no Gaussian gets thinner than the
-/// sampling, which a single row of points would otherwise be (with a floor of 1e-5
-/// squared fit units a flat strip's second Gaussian ended as one row of points).
-/// Bench-dev occluded (fast, seeds 0–4) mean RI 0.783 with that fixed floor, 0.784 at
-/// 0.25 spacings², 0.785 at 1; procedural occluded 0.730, 0.729, 0.727.
-const FRAME_GMM_FLOOR_SPACINGS: f64 = 0.25;
-/// Most rounds of `kinematics::frame_gmm`, a bound on its cost (a round is one pass
-/// over a frame's points and the Gaussians); most frames settle before it.
-const FRAME_GMM_ROUNDS: usize = 30;
-
-/// An occluded frame's Gaussian labels (`g`, one per point, each below `m`) refined
-/// on the frame's own points (`kinematics::frame_gmm`).
-pub(crate) fn refine_frame_labels(points: &[glam::Vec3], g: &mut [u32], m: usize) {
-    let spacing = crate::geom::knn::point_spacing(points);
-    crate::kinematics::frame_gmm::refine_labels(
-        points,
-        g,
-        m,
-        FRAME_GMM_FLOOR_SPACINGS * spacing * spacing,
-        FRAME_GMM_ROUNDS,
-    );
-}
-
 /// Occlusion handling (partial / occluded input losses of the supplement).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
 #[serde(rename_all = "lowercase")]
@@ -416,24 +392,19 @@ pub fn finish(
         .iter()
         .enumerate()
         .map(|(t, f)| {
-            step1
+            let mut g = step1
                 .segmenter
                 .as_ref()
                 .filter(|_| t != canonical)
                 .unwrap_or(&step1.model)
-                .segment(t, &f.points)
-        })
-        .collect::<Vec<Vec<u32>>>()
-        .into_iter()
-        .enumerate()
-        .map(|(t, mut g)| {
+                .segment(t, &f.points);
             // On occluded input the segmenting copy's Gaussians are posed from a search
             // that is often far off, so each frame's Gaussian labels are refined on that
             // frame's points alone (`kinematics::frame_gmm`). Not the canonical frame's:
             // its labels decide which pose moves each point, so they stay those of the
             // posed model.
             if step1.occlusion_used && t != canonical {
-                refine_frame_labels(&seq.frames[t].points, &mut g, m);
+                crate::kinematics::frame_gmm::refine_frame(&f.points, &mut g, m);
             }
             g.into_iter().map(part_of).collect()
         })

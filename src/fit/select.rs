@@ -1119,7 +1119,7 @@ mod size_rule_tests {
         for (k, f) in seq.frames.iter().enumerate() {
             let mut want = if k == 2 { &model } else { &seg }.segment(k, &f.points);
             if k != 2 {
-                crate::pipeline::refine_frame_labels(&f.points, &mut want, m);
+                crate::kinematics::frame_gmm::refine_frame(&f.points, &mut want, m);
             }
             let want: Vec<u32> = want
                 .into_iter()
