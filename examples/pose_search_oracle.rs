@@ -118,31 +118,43 @@ fn main() {
     }
     eprintln!("search {:.2} s", t0.elapsed().as_secs_f64());
     let model = params.to_model();
+    // Each part's frame-0 points, and for `OCCSC` an index over them.
+    let parts0: Vec<Vec<Vec3>> = (0..np)
+        .map(|p| {
+            frames[0]
+                .iter()
+                .zip(&labels0)
+                .filter(|(_, &l)| l as usize == p)
+                .map(|(x, _)| *x)
+                .collect()
+        })
+        .collect();
+    let occsc = std::env::var("OCCSC").is_ok();
+    let grids0: Vec<gsart::geom::knn::Grid> = if occsc {
+        parts0
+            .iter()
+            .map(|g| gsart::geom::knn::Grid::new(g))
+            .collect()
+    } else {
+        Vec::new()
+    };
     let mut total = 0.0;
     for t in 1..kk {
         let mut line = format!("t{t}:");
         let mut ft = 0.0;
-        for p in 0..np {
+        for (p, own) in parts0.iter().enumerate() {
             let pm = model.pose(t, p) * gsart::geom::se3::rigid_inverse(&model.pose(0, p));
             let gm = gt.poses[t][p] * gsart::geom::se3::rigid_inverse(&gt.poses[0][p]);
-            let (mut e, mut n) = (0.0, 0);
-            for (x, &l) in frames[0].iter().zip(&labels0) {
-                if l as usize == p {
-                    let x: Vec3 = *x;
+            let e: f64 = own
+                .iter()
+                .map(|x| {
                     let x = x.as_dvec3();
-                    e += (pm.transform_point3(x) - gm.transform_point3(x)).length();
-                    n += 1;
-                }
-            }
-            line += &format!(" {:.1}", 100.0 * e / n.max(1) as f64);
+                    (pm.transform_point3(x) - gm.transform_point3(x)).length()
+                })
+                .sum();
+            line += &format!(" {:.1}", 100.0 * e / own.len().max(1) as f64);
             if std::env::var("SCORES").is_ok() {
-                let g: Vec<DVec3> = frames[0]
-                    .iter()
-                    .zip(&labels0)
-                    .filter(|(_, &l)| l as usize == p)
-                    .map(|(x, _)| x.as_dvec3())
-                    .step_by(4)
-                    .collect();
+                let g: Vec<DVec3> = own.iter().map(|x| x.as_dvec3()).step_by(4).collect();
                 let mo = |m: glam::DMat4| (DMat3::from_mat4(m), m.w_axis.truncate());
                 let mut b = Vec::new();
                 let tg = pose_search::Target::frame(&data, t);
@@ -150,14 +162,8 @@ fn main() {
                 let sg = pose_search::score(&tg, &g, mo(gm), 0.8, &mut b);
                 line += &format!("[{:.2}/{:.2}]", sp * 1e4, sg * 1e4);
             }
-            if std::env::var("OCCSC").is_ok() {
-                let g: Vec<Vec3> = frames[0]
-                    .iter()
-                    .zip(&labels0)
-                    .filter(|(_, &l)| l as usize == p)
-                    .map(|(x, _)| *x)
-                    .collect();
-                let grid = gsart::geom::knn::Grid::new(&g);
+            if occsc {
+                let grid = &grids0[p];
                 let ex = |m: glam::DMat4| -> f64 {
                     let inv = gsart::geom::se3::rigid_inverse(&m);
                     frames[t]

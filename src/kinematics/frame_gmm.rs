@@ -30,6 +30,7 @@
 //! cuts parts by shape instead of motion (one Gaussian per part, a prototype: bench-dev
 //! full, fast, seed 0, mean RI 0.904 → 0.897); it is not used there.
 
+use crate::fit::gaussians::outer;
 use crate::math::Libm;
 use glam::{DMat3, DVec3, Vec3};
 
@@ -140,10 +141,6 @@ pub fn refine_labels(
         rounds += 1;
     }
     rounds
-}
-
-fn outer(a: DVec3, b: DVec3) -> DMat3 {
-    DMat3::from_cols(a * b.x, a * b.y, a * b.z)
 }
 
 #[cfg(test)]
