@@ -53,6 +53,15 @@ pub struct FitOptions {
     /// RI 0.888, recon 0.83). So the presets keep one fit and this is the user's
     /// choice, worth it with fast.
     pub restarts: Option<usize>,
+    /// Place the initial Gaussian centres on a medial-axis estimate of the start frame
+    /// (`fit::medial`, Laplacian-based contraction, as the paper's supplement does on
+    /// dense clouds) instead of on its points; dense (non-occluded) input only. Off by
+    /// default: measured worse on bench-dev full (fast, seeds 0–2: RI 0.897 → 0.886,
+    /// recon 0.72 → 0.91, flow 0.70 → 0.83, TED 1.52 → 3.05, joints in the bar 51 →
+    /// 30 of 162) and on the procedural quadruped (RI 0.902 → 0.809), better on the
+    /// procedural hand and arm (joints in the bar 0 → 2 and 2 → 5); see
+    /// docs/DEVELOPMENT.md, session 40.
+    pub medial_init: bool,
 }
 
 impl Default for FitOptions {
@@ -65,6 +74,7 @@ impl Default for FitOptions {
             seed: 0,
             working_size: 4096,
             restarts: None,
+            medial_init: false,
         }
     }
 }
@@ -577,6 +587,7 @@ pub fn finish(
         "m": step1.m,
         "candidates": step1.candidates,
         "restarts": step1.restarts,
+        "medial_init": step1.medial_init,
         "held_still": step1.held_still,
         "final_chamfer": step1.final_chamfer,
         "occlusion_used": step1.occlusion_used,

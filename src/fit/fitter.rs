@@ -120,6 +120,10 @@ pub struct FitConfig {
     /// Gaussians give the better part poses, but Gaussians that follow each frame's
     /// visible points label them better.
     pub segment_iters: usize,
+    /// Initial centres on the start frame's medial-axis estimate
+    /// (`init::initial_params_medial`; `FitOptions::medial_init`); ignored on
+    /// occluded input.
+    pub medial_init: bool,
 }
 
 impl FitConfig {
@@ -140,6 +144,7 @@ impl FitConfig {
             pose_search: Some(PoseSearchOpts::default()),
             motion_seg: Some(motion_seg),
             segment_iters: 0,
+            medial_init: false,
             report_every: 10,
             snapshot_every: 50,
         }
@@ -609,7 +614,11 @@ pub fn fit_candidate_segmented(
     }
     let sched = &cfg.sched;
     let mut rng = StdRng::seed_from_u64(cfg.seed ^ (m as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-    let mut params = init::initial_params(&data.frames32[0], m, kk);
+    let mut params = if cfg.medial_init && !cfg.occlusion {
+        init::initial_params_medial(&data.frames32[0], m, kk)
+    } else {
+        init::initial_params(&data.frames32[0], m, kk)
+    };
     let n = params.layout.len();
     let mut acc = GradAcc::new(params.layout);
     let mut flat = vec![0.0; n];

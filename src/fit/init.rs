@@ -8,6 +8,20 @@ use glam::{DVec3, Vec3};
 use super::gaussians::Params;
 use crate::geom::fps::farthest_point_sampling;
 
+/// As `initial_params`, with the centres farthest-point sampled on the cloud's medial
+/// axis estimate (`medial::contract`) instead of on the cloud.
+pub fn initial_params_medial(first: &[Vec3], m: usize, frames: usize) -> Params {
+    let medial = super::medial::contract(first, &super::medial::MedialOpts::default());
+    let mut p = initial_params(first, m, frames);
+    let idx = farthest_point_sampling(&medial, m, 0);
+    for (i, &j) in idx.iter().enumerate() {
+        for k in 0..frames {
+            p.set_center(k, i, medial[j].as_dvec3());
+        }
+    }
+    p
+}
+
 /// Initial parameters for m Gaussians on `first` (frame 0's working points).
 pub fn initial_params(first: &[Vec3], m: usize, frames: usize) -> Params {
     let mut p = Params::new(m, frames);
@@ -32,4 +46,56 @@ pub fn initial_params(first: &[Vec3], m: usize, frames: usize) -> Params {
         }
     }
     p
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Libm;
+
+    /// Two capped-cylinder surfaces (radius 0.04) meeting at a right angle, like a
+    /// bent limb.
+    fn elbow() -> Vec<Vec3> {
+        let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+        (0..4000)
+            .map(|i| {
+                let t = (i % 2000) as f32 / 2000.0;
+                let a = golden * i as f32;
+                let (u, v) = (0.04 * a.lcos(), 0.04 * a.lsin());
+                if i < 2000 {
+                    Vec3::new(u, v, t)
+                } else {
+                    Vec3::new(t, u, v)
+                }
+            })
+            .collect()
+    }
+
+    /// Distance from the nearer of the two cylinders' axes.
+    fn off_axis(p: DVec3) -> f64 {
+        (p.x * p.x + p.y * p.y)
+            .sqrt()
+            .min((p.y * p.y + p.z * p.z).sqrt())
+    }
+
+    #[test]
+    fn medial_centres_lie_inside_thin_parts_and_surface_ones_on_them() {
+        let pts = elbow();
+        let (m, k) = (8, 3);
+        let medial = initial_params_medial(&pts, m, k);
+        let surface = initial_params(&pts, m, k);
+        let mean_off =
+            |p: &Params| (0..m).map(|i| off_axis(p.center(0, i))).sum::<f64>() / m as f64;
+        assert!(mean_off(&surface) > 0.03, "surface {}", mean_off(&surface));
+        for i in 0..m {
+            assert!(
+                off_axis(medial.center(0, i)) < 0.015,
+                "{:?}",
+                medial.center(0, i)
+            );
+            // Every frame starts as the first, scales as the surface initialisation's.
+            assert_eq!(medial.center(2, i), medial.center(0, i));
+            assert_eq!(medial.log_scale(i), surface.log_scale(i));
+        }
+    }
 }

@@ -8,6 +8,7 @@ pub mod gaussians;
 pub mod hold_still;
 pub mod init;
 pub mod losses;
+pub mod medial;
 pub mod motion_seg;
 pub mod occluded_search;
 pub mod pose_init;
@@ -53,6 +54,9 @@ pub struct Step1Result {
     pub candidates: Vec<(usize, f64)>,
     /// Fits per candidate (the best of them stands for its m).
     pub restarts: usize,
+    /// Whether the centres started on the medial-axis estimate (`FitOptions::medial_init`
+    /// on dense input).
+    pub medial_init: bool,
     /// Gaussians held still in every frame (`hold_still`: on occluded input, and on full
     /// input a root whose turn the clouds cannot see).
     pub held_still: usize,

@@ -386,6 +386,7 @@ fn fit_once(
     cb: &mut dyn FnMut(&Progress) -> Control,
 ) -> Result<Step1Result> {
     let mut cfg = FitConfig::new(prep.sched.clone(), prep.occluded, seed);
+    cfg.medial_init = opts.medial_init;
     let fewest = prep.data.frames.iter().map(Vec::len).min().unwrap_or(0);
     let min_points = if prep.occluded {
         OCCLUDED_SEARCH_MIN_POINTS
@@ -451,6 +452,7 @@ fn fit_once(
     }
     Ok(Step1Result {
         held_still: held,
+        medial_init: cfg.medial_init && !prep.occluded,
         ..result
     })
 }
@@ -490,6 +492,7 @@ pub fn candidate_result(
         m,
         candidates: vec![(m, final_chamfer)],
         restarts: 1,
+        medial_init: false,
         held_still: 0,
         segmenter: None,
         timings: Timings {
@@ -1035,6 +1038,28 @@ mod size_rule_tests {
         }
         // One restart is the plain fit.
         assert_eq!(restart_seed(7, 0), 7);
+    }
+
+    #[test]
+    fn the_medial_initialisation_changes_the_start_and_is_recorded() {
+        let seq = bent_strip(&[240; 3]);
+        let opts = FitOptions {
+            quality: Quality::Fast,
+            iters: Some(40),
+            ..FitOptions::default()
+        };
+        let prep = prepare(&seq, &opts).unwrap();
+        let run = |medial_init: bool| {
+            let o = FitOptions {
+                medial_init,
+                ..opts.clone()
+            };
+            run_candidate(&prep, 2, &o, &mut |_| Control::Continue).unwrap()
+        };
+        let (points, medial) = (run(false), run(true));
+        assert!(!points.medial_init);
+        assert!(medial.medial_init);
+        assert_ne!(points.final_chamfer, medial.final_chamfer);
     }
 
     /// Frames of `n[k]` points, point i of frame k at `point(k, i, n[k])`.
