@@ -981,17 +981,20 @@ mod size_rule_tests {
         assert!(!prepare(&seq(800, false), &opts).unwrap().occluded);
     }
 
-    #[test]
-    fn restarts_keep_the_lowest_chamfer_of_their_seeds() {
-        // A bent strip moving over three frames (too few points for the pose search:
-        // the plain gradient fit, quick).
-        let seq = bent_strip(&[240; 3]);
+    /// A bent strip moving over three frames (too few points for the pose search: the
+    /// plain gradient fit, quick), prepared with a short fast fit's options.
+    fn quick_strip() -> (Prepared, FitOptions) {
         let opts = FitOptions {
             quality: Quality::Fast,
             iters: Some(40),
             ..FitOptions::default()
         };
-        let prep = prepare(&seq, &opts).unwrap();
+        (prepare(&bent_strip(&[240; 3]), &opts).unwrap(), opts)
+    }
+
+    #[test]
+    fn restarts_keep_the_lowest_chamfer_of_their_seeds() {
+        let (prep, opts) = quick_strip();
         let single = |r: usize| {
             let o = FitOptions {
                 seed: restart_seed(opts.seed, r),
@@ -1042,13 +1045,7 @@ mod size_rule_tests {
 
     #[test]
     fn the_medial_initialisation_changes_the_start_and_is_recorded() {
-        let seq = bent_strip(&[240; 3]);
-        let opts = FitOptions {
-            quality: Quality::Fast,
-            iters: Some(40),
-            ..FitOptions::default()
-        };
-        let prep = prepare(&seq, &opts).unwrap();
+        let (prep, opts) = quick_strip();
         let run = |medial_init: bool| {
             let o = FitOptions {
                 medial_init,
