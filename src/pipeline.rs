@@ -520,6 +520,17 @@ pub fn finish(
     } else {
         "occlusion handling: off (full-surface losses)".to_string()
     });
+    match step1.medial_init {
+        Some(true) => notes.push(
+            "the Gaussians started on a medial-axis estimate of the start frame (medial-axis initialisation)"
+                .to_string(),
+        ),
+        Some(false) => notes.push(
+            "the medial-axis initialisation is for full input: on occluded input the Gaussians started on the points"
+                .to_string(),
+        ),
+        None => {}
+    }
     let fits = if step1.restarts > 1 {
         format!(", best of {} fits each", step1.restarts)
     } else {
@@ -587,7 +598,7 @@ pub fn finish(
         "m": step1.m,
         "candidates": step1.candidates,
         "restarts": step1.restarts,
-        "medial_init": step1.medial_init,
+        "medial_init": step1.medial_init == Some(true),
         "held_still": step1.held_still,
         "final_chamfer": step1.final_chamfer,
         "occlusion_used": step1.occlusion_used,

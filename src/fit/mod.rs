@@ -54,9 +54,9 @@ pub struct Step1Result {
     pub candidates: Vec<(usize, f64)>,
     /// Fits per candidate (the best of them stands for its m).
     pub restarts: usize,
-    /// Whether the centres started on the medial-axis estimate (`FitOptions::medial_init`
-    /// on dense input).
-    pub medial_init: bool,
+    /// `FitOptions::medial_init` if it was asked for: whether the centres started on the
+    /// medial-axis estimate (not on occluded input).
+    pub medial_init: Option<bool>,
     /// Gaussians held still in every frame (`hold_still`: on occluded input, and on full
     /// input a root whose turn the clouds cannot see).
     pub held_still: usize,

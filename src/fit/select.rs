@@ -452,7 +452,7 @@ fn fit_once(
     }
     Ok(Step1Result {
         held_still: held,
-        medial_init: cfg.medial_init && !prep.occluded,
+        medial_init: cfg.medial_init.then_some(!prep.occluded),
         ..result
     })
 }
@@ -492,7 +492,7 @@ pub fn candidate_result(
         m,
         candidates: vec![(m, final_chamfer)],
         restarts: 1,
-        medial_init: false,
+        medial_init: None,
         held_still: 0,
         segmenter: None,
         timings: Timings {
@@ -1054,8 +1054,8 @@ mod size_rule_tests {
             run_candidate(&prep, 2, &o, &mut |_| Control::Continue).unwrap()
         };
         let (points, medial) = (run(false), run(true));
-        assert!(!points.medial_init);
-        assert!(medial.medial_init);
+        assert_eq!(points.medial_init, None);
+        assert_eq!(medial.medial_init, Some(true));
         assert_ne!(points.final_chamfer, medial.final_chamfer);
     }
 
