@@ -37,6 +37,8 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   await page.getByLabel('Maximum part count').fill('4');
   // Two fits per part count (restarts), the better one counting.
   await page.getByLabel('Fits per part count').selectOption('2');
+  // The Gaussians start on the medial-axis estimate (the core's option, off by default).
+  await page.getByLabel('Start on the medial axis').check();
   // Record what the live loss chart is given.
   await page.evaluate(() => {
     const c = window.gsart.state.chart;
@@ -56,7 +58,7 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   await page.waitForFunction(() => /running|left/.test(document.querySelector('#stage-list').innerText), null, { timeout: 120_000 });
   // Fast tries the two ends of the range (the core's rule).
   assert.match(await page.locator('#fit-status').innerText(), /m = 2, 4 of 2…4/);
-  assert.match(await page.locator('#fit-status').innerText(), /best of 2 fits each/);
+  assert.match(await page.locator('#fit-status').innerText(), /best of 2 fits each, started on the medial axis/);
   // A view taken while a Step-1 candidate still runs must differ from the first one
   // (or from the one before it). Sampled back to back, not at fixed times: a view takes
   // ~0.5 s to capture under SwiftShader, and on a quiet machine the laptop's Step 1
@@ -115,6 +117,8 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   assert.equal(json.version, 1);
   assert.equal(json.frames, json.labels.length);
   assert.equal(json.info.restarts, 2, 'each part count was fitted twice');
+  assert.equal(json.info.medial_init, true, 'the fit started on the medial axis');
+  assert.ok(json.info.notes.some((n) => /medial-axis estimate/.test(n)), 'the notes say so');
   // Both ends were finished and the second look kept one of them (the page runs the
   // core's rule on the two finished results).
   const look = json.info.second_look;

@@ -438,6 +438,7 @@ function readOptions() {
     occlusion: $('occlusion').value,
     seed: Math.max(0, Math.round(Number($('seed').value) || 0)),
     restarts: Math.min(3, Math.max(1, Math.round(Number($('restarts').value) || 1))),
+    medial_init: $('medial-init').checked,
     parts: null,
   };
   if (!auto) {
@@ -558,7 +559,8 @@ async function startFit() {
   const whole = parts.length === range[1] - range[0] + 1;
   const tried = range[0] === range[1] ? `m = ${range[0]}`
     : whole ? `m = ${range[0]}…${range[1]}` : `m = ${parts.join(', ')} of ${range[0]}…${range[1]}`;
-  const fits = opts.restarts > 1 ? `, best of ${opts.restarts} fits each` : '';
+  const fits = (opts.restarts > 1 ? `, best of ${opts.restarts} fits each` : '')
+    + (opts.medial_init ? ', started on the medial axis' : '');
   $('fit-status').innerHTML = `Trying ${tried} Gaussians (${par} in parallel${fits}), ${opts.quality} quality.`;
   const cands = new Map(); // m -> {iter, total, done}
   let totalGuess = 0;
