@@ -12,18 +12,17 @@ use crate::geom::fps::farthest_point_sampling;
 /// axis estimate (`medial::contract`) instead of on the cloud.
 pub fn initial_params_medial(first: &[Vec3], m: usize, frames: usize) -> Params {
     let medial = super::medial::contract(first, &super::medial::MedialOpts::default());
-    let mut p = initial_params(first, m, frames);
-    let idx = farthest_point_sampling(&medial, m, 0);
-    for (i, &j) in idx.iter().enumerate() {
-        for k in 0..frames {
-            p.set_center(k, i, medial[j].as_dvec3());
-        }
-    }
-    p
+    params_on(first, &medial, m, frames)
 }
 
 /// Initial parameters for m Gaussians on `first` (frame 0's working points).
 pub fn initial_params(first: &[Vec3], m: usize, frames: usize) -> Params {
+    params_on(first, first, m, frames)
+}
+
+/// m Gaussians scaled for the cloud `first`, centred on farthest-point samples of
+/// `sites` (the cloud itself, or points derived from it).
+fn params_on(first: &[Vec3], sites: &[Vec3], m: usize, frames: usize) -> Params {
     let mut p = Params::new(m, frames);
     let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
     for q in first {
@@ -34,11 +33,11 @@ pub fn initial_params(first: &[Vec3], m: usize, frames: usize) -> Params {
     // A part of an m-part object spans roughly ext / m^(1/3); a Gaussian covering it
     // has σ about a quarter of that.
     let s0 = (ext / (m.max(1) as f64).lcbrt() * 0.25).lln();
-    let idx = farthest_point_sampling(first, m, 0);
+    let idx = farthest_point_sampling(sites, m, 0);
     for i in 0..m {
         let c = idx
             .get(i)
-            .map(|&j| first[j].as_dvec3())
+            .map(|&j| sites[j].as_dvec3())
             .unwrap_or(DVec3::ZERO);
         p.set_log_scale(i, DVec3::splat(s0));
         for k in 0..frames {

@@ -154,13 +154,14 @@ pub fn contract(points: &[Vec3], opts: &MedialOpts) -> Vec<Vec3> {
     let spread0 = spreads(&nb, &x0);
     let mut x = x0;
     let mut wl = opts.contraction;
+    let mut spread = spread0.clone();
     let mut last: f64 = spread0.iter().sum();
     let mut thinned = false;
     for _ in 0..opts.iterations {
         // Cao et al.'s attraction W_H,i = sqrt(A⁰_i / A_i), with the neighbourhood's
         // mean squared spread for the one-ring area: contracted points hold still
         // while thick regions go on contracting.
-        let wh2: Vec<f64> = spreads(&nb, &x)
+        let wh2: Vec<f64> = spread
             .iter()
             .zip(&spread0)
             .map(|(s, s0)| (s0 / s.max(1e-12 * s0.max(1e-300))).sqrt())
@@ -171,9 +172,10 @@ pub fn contract(points: &[Vec3], opts: &MedialOpts) -> Vec<Vec3> {
         // Stop once the cloud has thinned (the spread fell by a fifth in one
         // iteration) and then stopped thinning: the cross-sections are gone, and
         // going on would only shorten the skeleton.
-        let spread: f64 = spreads(&nb, &x).iter().sum();
-        let step = spread / last.max(1e-300);
-        last = spread;
+        spread = spreads(&nb, &x);
+        let total: f64 = spread.iter().sum();
+        let step = total / last.max(1e-300);
+        last = total;
         thinned |= step < THINNING;
         if thinned && step > PLATEAU {
             break;
