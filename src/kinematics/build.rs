@@ -8,6 +8,7 @@ use glam::{DMat4, DVec3, Vec3};
 use serde::Serialize;
 
 use super::flips::Repair;
+use super::invisible_joints::invisible_joints;
 use super::merge::{absorb, merge_loss, merge_parts, MergeEvent, MergeOptions};
 use super::observed::{
     keep_faithful_poses, object_size, observed_motion, points_by_part, polish_motions,
@@ -69,6 +70,11 @@ pub struct KinOptions {
     /// procedural laptop (recon 0.38 → 0.78, 0.57 → 0.68, 0.84 → 1.36, 0.43 → 0.89
     /// on seeds 0–3).
     pub keep_still_root: bool,
+    /// After the refinement, absorb a hinge that turns its child by a quarter turn or
+    /// more while the parent's motion fits the child's points nearly as well
+    /// (`kinematics::invisible_joints`: two pieces of one symmetric link), and build
+    /// the tree again. Full input only.
+    pub absorb_invisible: bool,
 }
 
 impl Default for KinOptions {
@@ -82,6 +88,7 @@ impl Default for KinOptions {
             flips: true,
             spin_free: true,
             keep_still_root: false,
+            absorb_invisible: true,
         }
     }
 }
@@ -416,6 +423,11 @@ pub fn build_articulated(
         counts[*l as usize] += 1;
     }
     let mut merged = merge_parts(poses, &counts, &dist_in, &opts.merge);
+    let grids: Vec<Grid> = if opts.absorb_invisible {
+        points.iter().map(|f| Grid::new(f)).collect()
+    } else {
+        Vec::new()
+    };
     let t1 = clock();
     timings.push(("merge".to_string(), t1 - t0));
     progress_to(progress, Stage::Tree, 1, 3, vec![])?;
@@ -499,7 +511,7 @@ pub fn build_articulated(
         proj_s += tc - tb;
         let still = still_joints(&result);
         if !still.is_empty() {
-            merged = absorb(&merged, &still, poses, &counts);
+            merged = absorb(&merged, &still, poses, &counts, "still");
             continue;
         }
         progress_to(progress, Stage::Joints, 0, 1, vec![])?;
@@ -510,8 +522,16 @@ pub fn build_articulated(
         refine_s += clock() - tc;
         let still = still_joints(&result);
         if !still.is_empty() {
-            merged = absorb(&merged, &still, poses, &counts);
+            merged = absorb(&merged, &still, poses, &counts, "still");
             continue;
+        }
+        if opts.absorb_invisible {
+            let motions = motions_from_canonical(&merged.poses, canonical);
+            let unseen = invisible_joints(&result, &motions, points, &grids, dist.spacing);
+            if !unseen.is_empty() {
+                merged = absorb(&merged, &unseen, poses, &counts, "invisible");
+                continue;
+            }
         }
         break (
             parts,
@@ -725,6 +745,7 @@ mod tests {
             polish: false,
             flips: false,
             keep_still_root: true,
+            absorb_invisible: false,
             ..Default::default()
         }
     }

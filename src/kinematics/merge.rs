@@ -258,14 +258,16 @@ fn largest_member(members: &[usize], counts: &[usize]) -> usize {
 }
 
 /// Absorbs each `(child, parent)` pair of merged parts into one part (a joint that does
-/// not move: see `build::still_joints`), renumbering the parts in order. A part's pose
-/// becomes that of its largest input member, as in [`merge_parts`]; `input_poses[k][g]`
-/// are the input parts' poses and `counts[g]` their point counts.
+/// not move, `build::still_joints`, or one the clouds do not show,
+/// `invisible_joints`), renumbering the parts in order; `kind` names the reason in the
+/// log. A part's pose becomes that of its largest input member, as in [`merge_parts`];
+/// `input_poses[k][g]` are the input parts' poses and `counts[g]` their point counts.
 pub fn absorb(
     out: &MergeOutcome,
     pairs: &[(usize, usize)],
     input_poses: &[Vec<DMat4>],
     counts: &[usize],
+    kind: &'static str,
 ) -> MergeOutcome {
     // Union-find over merged parts.
     let mut up: Vec<usize> = (0..out.parts).collect();
@@ -281,7 +283,7 @@ pub fn absorb(
         let (a, b) = (find(&mut up, c), find(&mut up, p));
         if a != b {
             log.push(MergeEvent {
-                kind: "still",
+                kind,
                 from: out.members[a].clone(),
                 into: out.members[b].clone(),
                 loss: 0.0,
@@ -390,7 +392,7 @@ mod tests {
             poses: vec![vec![DMat4::IDENTITY; 4]; k],
             log: Vec::new(),
         };
-        let a = absorb(&out, &[(3, 1), (1, 0)], &poses, &counts);
+        let a = absorb(&out, &[(3, 1), (1, 0)], &poses, &counts, "still");
         assert_eq!(a.parts, 2);
         assert_eq!(a.map, vec![0, 0, 1, 0, 0, 0]);
         assert_eq!(a.members, vec![vec![0, 1, 3, 4, 5], vec![2]]);
