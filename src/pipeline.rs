@@ -379,6 +379,10 @@ pub fn finish(
         // occluded, the seven robots, recon / flow, fast seed 0: 12.61 → 10.62 / 14.31
         // → 10.81; balanced seed 0: 13.44 → 10.08 / 16.38 → 11.47.
         kin_opts.keep_still_root = true;
+        // Nor absorbing joints the clouds do not show (`kinematics::invisible_joints`):
+        // a one-sided frame's costs say little (prototype, fast, seeds 0–4: RI 0.790 →
+        // 0.531).
+        kin_opts.absorb_invisible = false;
     }
     let (mut result, kin) = crate::kinematics::build_articulated(
         &points,
@@ -587,6 +591,16 @@ pub fn finish(
             kin.flips
         ));
     }
+    let invisible = kin
+        .merge_log
+        .iter()
+        .filter(|e| e.kind == "invisible")
+        .count();
+    if invisible > 0 {
+        notes.push(format!(
+            "{invisible} joint(s) absorbed into their parent: each turned its part a quarter turn or more without moving its points (pieces of one nearly symmetric part)"
+        ));
+    }
     if kin.swept > 0 {
         notes.push(format!(
             "{} part poses were replaced by a pose found along their joints (a better fit to the cloud, or one as good on a smoother path of joint states)",
@@ -613,6 +627,7 @@ pub fn finish(
         "unexplained_seconds": coverage_s,
         "symmetry_turns": kin.flips,
         "joint_sweeps": kin.swept,
+        "invisible_joints": invisible,
         "refine": kin.refine,
         "notes": notes,
     }));
