@@ -526,8 +526,10 @@ pub fn build_articulated(
             continue;
         }
         if opts.absorb_invisible {
+            let t = clock();
             let motions = motions_from_canonical(&merged.poses, canonical);
             let unseen = invisible_joints(&result, &motions, points, &grids, dist.spacing);
+            refine_s += clock() - t;
             if !unseen.is_empty() {
                 merged = absorb(&merged, &unseen, poses, &counts, "invisible");
                 continue;

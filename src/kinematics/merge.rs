@@ -53,7 +53,8 @@ impl Default for MergeOptions {
 /// What happened to a part.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct MergeEvent {
-    /// `merge` (static pair) or `reassign` (tiny part).
+    /// `merge` (static pair), `reassign` (tiny part), `still` (a joint that does not
+    /// move) or `invisible` (a joint the clouds do not show, `invisible_joints`).
     pub kind: &'static str,
     /// Input parts of the group that was absorbed, and of the group it joined.
     pub from: Vec<usize>,
