@@ -347,13 +347,13 @@ fn refine_options(opts: &KinOptions, poses: &[Vec<DMat4>], root: usize) -> Optio
 fn spin_free_refined(
     result: &mut FitResult,
     points: &[Vec<Vec3>],
+    grids: &[Grid],
     ro: &RefineOptions,
     first: &RefineReport,
     limit_pad: f64,
     progress: &mut dyn FnMut(&Progress) -> Control,
 ) -> crate::Result<Vec<SpinFree>> {
     const LOSS_SLACK: f64 = 1.01;
-    let grids: Vec<Grid> = points.iter().map(|p| Grid::new(p)).collect();
     let c = result.canonical_frame;
     let by_part = points_by_part(&points[c], &result.labels[c], result.parts);
     let base_loss = if first.accepted {
@@ -364,7 +364,7 @@ fn spin_free_refined(
     let mut allowed: Vec<bool> = vec![true; result.parts];
     for _ in 0..2 {
         let mut alt = result.clone();
-        let changes = spin_free_hinges(&mut alt, points, &grids, limit_pad, PROPOSE_SLACK, &|p| {
+        let changes = spin_free_hinges(&mut alt, points, grids, limit_pad, PROPOSE_SLACK, &|p| {
             allowed.get(p).copied().unwrap_or(false)
         });
         if changes.is_empty() {
@@ -379,8 +379,8 @@ fn spin_free_refined(
         let failed: Vec<usize> = changes
             .iter()
             .filter(|ch| {
-                subtree_fit(&alt, &grids, &by_part, ch.child)
-                    > KEEP_SLACK * subtree_fit(result, &grids, &by_part, ch.child)
+                subtree_fit(&alt, grids, &by_part, ch.child)
+                    > KEEP_SLACK * subtree_fit(result, grids, &by_part, ch.child)
             })
             .map(|ch| ch.child)
             .collect();
@@ -423,7 +423,8 @@ pub fn build_articulated(
         counts[*l as usize] += 1;
     }
     let mut merged = merge_parts(poses, &counts, &dist_in, &opts.merge);
-    let grids: Vec<Grid> = if opts.absorb_invisible {
+    // Every frame's index, for the invisible-joint check and the spin-free hinges.
+    let grids: Vec<Grid> = if opts.absorb_invisible || opts.spin_free {
         points.iter().map(|f| Grid::new(f)).collect()
     } else {
         Vec::new()
@@ -551,7 +552,15 @@ pub fn build_articulated(
     let spin_free = match (refine_options(opts, &merged.poses, root), &refine_report) {
         (Some(ro), Some(rep)) if opts.spin_free => {
             let t = clock();
-            let kept = spin_free_refined(&mut result, points, &ro, rep, opts.limit_pad, progress)?;
+            let kept = spin_free_refined(
+                &mut result,
+                points,
+                &grids,
+                &ro,
+                rep,
+                opts.limit_pad,
+                progress,
+            )?;
             refine_s += clock() - t;
             kept
         }
