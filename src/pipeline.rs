@@ -383,6 +383,9 @@ pub fn finish(
         // a one-sided frame's costs say little (prototype, fast, seeds 0–4: RI 0.790 →
         // 0.531).
         kin_opts.absorb_invisible = false;
+        // Nor the restarted pair fits of the tree: bench-dev occluded, balanced, seeds
+        // 0–2, TED 4.10 → 4.29 (fast seeds 0–4 4.37 → 4.31); full input gains.
+        kin_opts.restart_pairs = false;
     }
     let (mut result, kin) = crate::kinematics::build_articulated(
         &points,

@@ -75,6 +75,10 @@ pub struct KinOptions {
     /// (`kinematics::invisible_joints`: two pieces of one symmetric link), and build
     /// the tree again. Full input only.
     pub absorb_invisible: bool,
+    /// The tree's revolute L_1DOF of a pair may come from a fit restarted from each
+    /// frame's own turn (`screw::revolute_restart`, `tree::pair_costs`): one frame of
+    /// a link flipped half a turn otherwise sets the hinge's axis. Full input only.
+    pub restart_pairs: bool,
 }
 
 impl Default for KinOptions {
@@ -89,6 +93,7 @@ impl Default for KinOptions {
             spin_free: true,
             keep_still_root: false,
             absorb_invisible: true,
+            restart_pairs: true,
         }
     }
 }
@@ -460,7 +465,7 @@ pub fn build_articulated(
         // Extents, pair costs, root and tree from the parts' motions.
         let tree_of = |motions: &[Vec<DMat4>]| {
             let extents = part_extents(points, &new_labels, motions, canonical);
-            let costs = pair_costs(motions, &dist, canonical, &extents);
+            let costs = pair_costs(motions, &dist, canonical, &extents, opts.restart_pairs);
             let root = least_motion_root(motions, &sizes);
             let parent = spanning_tree(&costs, root);
             (extents, costs, root, parent)
@@ -757,6 +762,7 @@ mod tests {
             flips: false,
             keep_still_root: true,
             absorb_invisible: false,
+            restart_pairs: false,
             ..Default::default()
         }
     }
