@@ -9,6 +9,11 @@
 //! frame c. (The paper writes L_1DOF with consecutive motions Oᵏ; the world-frame axis of
 //! (Oᵢᵏ)⁻¹Oⱼᵏ moves with the parent, so a fixed-axis fit only holds in the canonical
 //! form used here. For a static parent both forms agree.)
+//!
+//! **Deviations:** L_1DOF sums the frames left after setting aside the worst-explained
+//! fifth (`OUTLIER_FRACTION`), and the tree may take a hinge fit restarted from each
+//! frame's own turn (`revolute_restart`): a Step-1 pose flipped half a turn in one frame
+//! otherwise decides a pair's fit.
 
 use crate::math::Libm;
 use glam::{DMat3, DMat4, DQuat, DVec3};

@@ -1,6 +1,8 @@
 //! The kinematic tree (paper §3.2): pairwise costs λ_spatial·L_spatial + λ_1DOF·L_1DOF
 //! (λ = 100 and 1), their minimum spanning tree, the root (the part with the least
-//! motion over the sequence) and the parent of every part.
+//! motion over the sequence) and the parent of every part. On full input a pair's
+//! revolute L_1DOF may come from a fit restarted from each frame's own turn
+//! (`screw::revolute_restart`), so that one flipped Step-1 pose does not pick a parent.
 //!
 //! The MST uses `petgraph::algo::min_spanning_tree` (Kruskal with a union-find) on the
 //! complete graph of the parts: already a dependency, well tested, and P ≤ a few dozen.
