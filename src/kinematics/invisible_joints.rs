@@ -38,6 +38,7 @@
 
 use glam::{DMat4, Vec3};
 
+use super::project::motions_from_canonical;
 use crate::geom::knn::Grid;
 use crate::geom::se3::from_row_major;
 use crate::io::gt::JointType;
@@ -82,11 +83,12 @@ pub fn invisible_joints(
         return Vec::new();
     };
     let cap2 = (CAP_SPACINGS * spacing).powi(2) as f32;
-    let model = |k: usize, p: usize| -> DMat4 {
-        let at_k = from_row_major(&result.poses[k][p]);
-        let at_c = from_row_major(&result.poses[c][p]);
-        at_k * at_c.inverse()
-    };
+    let poses: Vec<Vec<DMat4>> = result
+        .poses
+        .iter()
+        .map(|f| f.iter().map(from_row_major).collect())
+        .collect();
+    let model = motions_from_canonical(&poses, c);
     // Mean capped squared distance of `pts` carried by `m` onto `grid`.
     let carried = |pts: &[Vec3], m: DMat4, grid: &Grid| -> f64 {
         let m = m.as_mat4();
@@ -104,7 +106,7 @@ pub fn invisible_joints(
             if k == c || grid.is_empty() {
                 continue;
             }
-            let mut best = carried(pts, model(k, p), grid);
+            let mut best = carried(pts, model[k][p], grid);
             if let Some(&obs) = observed.get(k).and_then(|f| f.get(p)) {
                 best = best.min(carried(pts, obs, grid));
             }
@@ -129,8 +131,8 @@ pub fn invisible_joints(
                 return None;
             }
             let own = cost(&pts, j.child);
-            let carried = cost(&pts, j.parent);
-            (carried <= COST_RATIO * own).then_some((j.child, j.parent))
+            let by_parent = cost(&pts, j.parent);
+            (by_parent <= COST_RATIO * own).then_some((j.child, j.parent))
         })
         .collect()
 }
