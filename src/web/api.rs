@@ -294,6 +294,45 @@ pub fn second_look(best_json: &str, runner_json: &str) -> Result<JsValue, JsErro
     Ok(o.into())
 }
 
+/// The seed of a second attempt at the whole fit when the finished result (JSON),
+/// fitted with `options`, asks for one (`pipeline::retry_wanted`: balanced, full input,
+/// much of the clouds unexplained), or `undefined`.
+#[wasm_bindgen]
+pub fn retry_seed(result_json: &str, options: JsValue) -> Result<Option<f64>, JsError> {
+    let opts = options_from_js(options)?;
+    let first = FitResult::from_json(result_json, "first attempt's result").map_err(js_err)?;
+    // Seeds stay below 2⁵³ (`pipeline::retry_seed`), so a JS number holds them exactly.
+    Ok(crate::pipeline::retry_wanted(&first, &opts).map(|s| s as f64))
+}
+
+/// The core's look at two attempts (`pipeline::retry_look`), the first fitted with
+/// `options`, the second from `retry_seed`: `{second, result}`, where `second` says
+/// whether the second attempt was kept and `result` is the kept result's JSON with the
+/// look recorded in its info and notes (the first's unchanged when the look cannot be
+/// made).
+#[wasm_bindgen]
+pub fn retry_look(
+    first_json: &str,
+    second_json: &str,
+    options: JsValue,
+) -> Result<JsValue, JsError> {
+    let opts = options_from_js(options)?;
+    let first = FitResult::from_json(first_json, "first attempt's result").map_err(js_err)?;
+    let second = FitResult::from_json(second_json, "second attempt's result").map_err(js_err)?;
+    let seeds = (opts.seed, crate::pipeline::retry_seed(opts.seed));
+    let o = Object::new();
+    let Some(look) = crate::pipeline::retry_look(&first, &second, seeds) else {
+        set(&o, "second", &JsValue::FALSE);
+        set(&o, "result", &JsValue::from_str(first_json));
+        return Ok(o.into());
+    };
+    let mut kept = if look.take_second { second } else { first };
+    crate::pipeline::record_retry(&mut kept, &look);
+    set(&o, "second", &JsValue::from_bool(look.take_second));
+    set(&o, "result", &JsValue::from_str(&kept.to_json()));
+    Ok(o.into())
+}
+
 /// The candidate the core's rule selects among `(m, loss)` pairs (lowest final
 /// Chamfer, ties to the smaller m), so the page knows which worker goes on.
 #[wasm_bindgen]

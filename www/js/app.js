@@ -561,107 +561,144 @@ async function startFit() {
     : whole ? `m = ${range[0]}…${range[1]}` : `m = ${parts.join(', ')} of ${range[0]}…${range[1]}`;
   const fits = (opts.restarts > 1 ? `, best of ${opts.restarts} fits each` : '')
     + (opts.medial_init ? ', started on the medial axis' : '');
-  $('fit-status').innerHTML = `Trying ${tried} Gaussians (${par} in parallel${fits}), ${opts.quality} quality.`;
-  const cands = new Map(); // m -> {iter, total, done}
-  let totalGuess = 0;
-  let nCand = parts.length;
-  const step1Progress = () => {
-    let done = 0, tot = 0;
-    for (const c of cands.values()) { done += c.done ? c.total : c.iter; tot += c.total; }
-    const missing = nCand - cands.size;
-    tot += missing * totalGuess;
-    const finished = [...cands.values()].filter((c) => c.done).length;
-    const running = cands.size - finished;
-    const frac = tot ? done / tot : 0;
-    setStage('gaussians', frac);
-    const eta = S.stageEls.gaussians.row.querySelector('.seta');
-    eta.textContent = `${finished}/${nCand} done${running ? ` · ${running} running` : ''} · ${eta.textContent}`;
+  const trying = `Trying ${tried} Gaussians (${par} in parallel${fits}), ${opts.quality} quality.`;
+  $('fit-status').innerHTML = trying;
+  let job = null; // the attempt running now
+  // One attempt of the whole fit with these options (the core may ask for a second,
+  // from another seed): Step 1's candidates in workers, then Steps 2–3.
+  const attempt = async (jobOpts) => {
+    const cands = new Map(); // m -> {iter, total, done}
+    let totalGuess = 0;
+    let nCand = parts.length;
+    const step1Progress = () => {
+      let done = 0, tot = 0;
+      for (const c of cands.values()) { done += c.done ? c.total : c.iter; tot += c.total; }
+      const missing = nCand - cands.size;
+      tot += missing * totalGuess;
+      const finished = [...cands.values()].filter((c) => c.done).length;
+      const running = cands.size - finished;
+      const frac = tot ? done / tot : 0;
+      setStage('gaussians', frac);
+      const eta = S.stageEls.gaussians.row.querySelector('.seta');
+      eta.textContent = `${finished}/${nCand} done${running ? ` · ${running} running` : ''} · ${eta.textContent}`;
+    };
+    // Progress reaches the page up to 20 times a second per worker; the page redraws
+    // at most every UI_MS: every DOM or view update repaints the page, which on a
+    // two-core laptop takes CPU from the workers (robot workload, fast, headless
+    // Chromium, per-candidate times: 6.3–7.2 s with a redraw per message, 5.6–6.7 s
+    // at UI_MS = 250, 5.0–5.8 s with no progress shown at all).
+    let uiTimer = null;
+    let pendingSnap = null;
+    const refreshUi = () => {
+      uiTimer = null;
+      if (S.job !== job) return;
+      step1Progress();
+      if (pendingSnap) showSnapshot(...pendingSnap);
+      pendingSnap = null;
+    };
+    const scheduleUi = () => { if (uiTimer === null) uiTimer = setTimeout(refreshUi, UI_MS); };
+    S.working = null;
+    S.focusM = null;
+    S.gaussiansSnapshot = null;
+    job = new FitJob({
+      frames: good.map((f) => f.points),
+      names: good.map((f) => f.name),
+      options: jobOpts,
+      parts,
+      gt: gtOk ? S.gt : null,
+      labels: gtOk ? good.map((f) => f.labels) : null,
+      bestOf: (ms, losses) => wasm.best_candidate(Uint32Array.from(ms), Float64Array.from(losses)),
+      extraCandidate: (ms, losses, occluded) => wasm.extra_candidate(Uint32Array.from(ms), Float64Array.from(losses),
+        jobOpts, occluded, jobOpts.parts === null) ?? null,
+      secondLook: (best, runner) => wasm.second_look(best, runner),
+      callbacks: {
+        onCandidateStart: (m) => {
+          cands.set(m, { iter: 0, total: totalGuess, done: false });
+          if (S.focusM === null) S.focusM = m;
+          step1Progress();
+        },
+        onWorking: (m, frames) => { if (m === S.focusM || !S.working) S.working = { m, frames }; },
+        onCandidateProgress: (m, p) => {
+          const c = cands.get(m);
+          if (!c) return;
+          if (p.stage === 'gaussians' || p.stage === 'init') {
+            c.iter = p.iter; c.total = p.total || c.total;
+            if (!totalGuess && p.total) totalGuess = p.total;
+          }
+          const y = lossValue(p.losses);
+          if (p.total) S.chart.add(`m${m}`, `m=${m}`, p.iter / p.total, y);
+          if (p.snapshot && m === S.focusM) pendingSnap = [m, p.snapshot];
+          scheduleUi();
+        },
+        onExtraCandidate: (m, done) => {
+          nCand += 1;
+          const top = done[done.length - 1];
+          const bottom = done[0];
+          $('fit-status').innerHTML = `m = ${top.m} fitted worse than m = ${bottom.m}`
+            + ` (final Chamfer ${top.loss.toExponential(2)} against ${bottom.loss.toExponential(2)}): trying m = ${m} too.`;
+          step1Progress();
+        },
+        onCandidateDone: (m) => {
+          const c = cands.get(m);
+          if (c) c.done = true;
+          if (S.focusM === m) {
+            // Follow a candidate that is still running.
+            const next = [...cands.entries()].find(([, v]) => !v.done);
+            S.focusM = next ? next[0] : S.focusM;
+          }
+          step1Progress();
+        },
+        onFinishProgress: (p) => {
+          const key = p.stage === 'done' ? 'joints' : p.stage;
+          if (!S.stageEls[key]) return;
+          setStage(key, p.total ? p.iter / p.total : 0);
+          if (key === 'joints' && p.total) {
+            if (S.chart.title !== 'Step 3 loss') S.chart.clear('Step 3 loss');
+            S.chart.add('joints', 'joints', p.iter / p.total, lossValue(p.losses));
+          }
+        },
+      },
+    });
+    S.job = job;
+    updateHud();
+    try {
+      return await job.run();
+    } finally {
+      clearTimeout(uiTimer);
+    }
   };
-  // Progress reaches the page up to 20 times a second per worker; the page redraws
-  // at most every UI_MS: every DOM or view update repaints the page, which on a
-  // two-core laptop takes CPU from the workers (robot workload, fast, headless
-  // Chromium, per-candidate times: 6.3–7.2 s with a redraw per message, 5.6–6.7 s
-  // at UI_MS = 250, 5.0–5.8 s with no progress shown at all).
-  let uiTimer = null;
-  let pendingSnap = null;
-  const refreshUi = () => {
-    uiTimer = null;
-    if (S.job !== job) return;
-    step1Progress();
-    if (pendingSnap) showSnapshot(...pendingSnap);
-    pendingSnap = null;
-  };
-  const scheduleUi = () => { if (uiTimer === null) uiTimer = setTimeout(refreshUi, UI_MS); };
-  S.working = null;
-  S.focusM = null;
-  S.gaussiansSnapshot = null;
-  const job = new FitJob({
-    frames: good.map((f) => f.points),
-    names: good.map((f) => f.name),
-    options: opts,
-    parts,
-    gt: gtOk ? S.gt : null,
-    labels: gtOk ? good.map((f) => f.labels) : null,
-    bestOf: (ms, losses) => wasm.best_candidate(Uint32Array.from(ms), Float64Array.from(losses)),
-    extraCandidate: (ms, losses, occluded) => wasm.extra_candidate(Uint32Array.from(ms), Float64Array.from(losses),
-      opts, occluded, opts.parts === null) ?? null,
-    secondLook: (best, runner) => wasm.second_look(best, runner),
-    callbacks: {
-      onCandidateStart: (m) => {
-        cands.set(m, { iter: 0, total: totalGuess, done: false });
-        if (S.focusM === null) S.focusM = m;
-        step1Progress();
-      },
-      onWorking: (m, frames) => { if (m === S.focusM || !S.working) S.working = { m, frames }; },
-      onCandidateProgress: (m, p) => {
-        const c = cands.get(m);
-        if (!c) return;
-        if (p.stage === 'gaussians' || p.stage === 'init') {
-          c.iter = p.iter; c.total = p.total || c.total;
-          if (!totalGuess && p.total) totalGuess = p.total;
-        }
-        const y = lossValue(p.losses);
-        if (p.total) S.chart.add(`m${m}`, `m=${m}`, p.iter / p.total, y);
-        if (p.snapshot && m === S.focusM) pendingSnap = [m, p.snapshot];
-        scheduleUi();
-      },
-      onExtraCandidate: (m, done) => {
-        nCand += 1;
-        const top = done[done.length - 1];
-        const bottom = done[0];
-        $('fit-status').innerHTML = `m = ${top.m} fitted worse than m = ${bottom.m}`
-          + ` (final Chamfer ${top.loss.toExponential(2)} against ${bottom.loss.toExponential(2)}): trying m = ${m} too.`;
-        step1Progress();
-      },
-      onCandidateDone: (m) => {
-        const c = cands.get(m);
-        if (c) c.done = true;
-        if (S.focusM === m) {
-          // Follow a candidate that is still running.
-          const next = [...cands.entries()].find(([, v]) => !v.done);
-          S.focusM = next ? next[0] : S.focusM;
-        }
-        step1Progress();
-      },
-      onFinishProgress: (p) => {
-        const key = p.stage === 'done' ? 'joints' : p.stage;
-        if (!S.stageEls[key]) return;
-        setStage(key, p.total ? p.iter / p.total : 0);
-        if (key === 'joints' && p.total) {
-          if (S.chart.title !== 'Step 3 loss') S.chart.clear('Step 3 loss');
-          S.chart.add('joints', 'joints', p.iter / p.total, lossValue(p.losses));
-        }
-      },
-    },
-  });
-  S.job = job;
-  updateHud();
   const t0 = performance.now();
   let out;
+  let retried = '';
   try {
-    out = await job.run();
+    out = await attempt(opts);
+    // A balanced fit of full input whose model leaves much of the clouds unexplained is
+    // done once more from another seed, and the core keeps one (`pipeline::retry_wanted`,
+    // `pipeline::retry_look`), as `gsart fit` does.
+    const seed = wasm.retry_seed(out.result, opts);
+    if (seed !== undefined && S.job === job) {
+      const again = { ...opts, seed };
+      const first = out;
+      const share = (100 * JSON.parse(first.result).info.unexplained).toFixed(2);
+      buildStages(!!gtOk);
+      S.chart.clear('Step 1 loss');
+      $('fit-status').innerHTML = `The model left ${share} % of the points unexplained: fitting again from seed ${again.seed}. ${trying}`;
+      let second = null;
+      try {
+        second = await attempt(again);
+      } catch (e) {
+        // The second attempt failing leaves the first as it is (a cancel still cancels).
+        if (e instanceof CancelledError || S.job !== job) throw e;
+        console.warn('second attempt:', e);
+      }
+      if (second) {
+        const look = wasm.retry_look(first.result, second.result, opts);
+        const kept = look.second ? second : first;
+        out = { ...kept, result: look.result, finishMs: first.finishMs + second.finishMs };
+        retried = `Fitted twice (seeds ${opts.seed} and ${seed}); the ${look.second ? 'second' : 'first'} was kept. `;
+      }
+    }
   } catch (e) {
-    clearTimeout(uiTimer);
     if (S.job !== job) return; // replaced or cancelled by a new load
     S.job = null;
     fitUi(false);
@@ -670,7 +707,6 @@ async function startFit() {
     showFrame(S.current);
     return;
   }
-  clearTimeout(uiTimer);
   if (S.job !== job) return;
   S.job = null;
   fitUi(false);
@@ -680,8 +716,8 @@ async function startFit() {
   // Where the time went: each candidate's Step 1 in its worker, then Steps 2–3.
   const sec1 = (ms) => `${(ms / 1000).toFixed(1)} s`;
   const perCand = out.candidates.map((c) => `${c.m} (${sec1(c.ms)})`).join(', ');
-  $('fit-status').innerHTML = `<span class="msg-good">Done in ${fmtTime(secs)}.</span>`
-    + ` Step 1: m = ${perCand}; Steps 2–3: ${sec1(out.finishMs)}.`;
+  $('fit-status').innerHTML = `<span class="msg-good">Done in ${fmtTime(secs)}.</span> ${retried}`
+    + `Step 1: m = ${perCand}; Steps 2–3: ${sec1(out.finishMs)}.`;
   openResult(out.result, S.seqName, 'fit', { seconds: secs, best, metrics: out.metrics, metricsError: out.metricsError });
 }
 
