@@ -352,7 +352,8 @@ fn unexplained_share(result: &crate::io::result::FitResult) -> Option<f64> {
 /// 1.536 / 92; 13 fits were done twice (talos on every seed; well fitted robots leave
 /// 0.1–0.6 %), 9 of them kept the second attempt. A bound of 0.6 % did 16 twice for
 /// about the same (flow 0.527), 1.0 % 12 (flow 0.528); taking the attempt with the
-/// lower share whatever the ratio, flow 0.526 but TED 1.571. Fast would gain too
+/// lower share whatever the ratio, flow 0.526 but TED 1.571. The 35 fits took 1.46×
+/// the time (438 → 640 s; talos 12.3 → 25.0 s a sequence). Fast would gain too
 /// (flow 0.731 → 0.646, TED 1.63 → 1.71) but do 18 of its 35 fits twice, against the
 /// point of the preset; the paper preset keeps the paper's procedure. See
 /// docs/DEVELOPMENT.md, session 43.
