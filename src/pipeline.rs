@@ -1,5 +1,7 @@
 //! The three steps end to end (Step 1 Gaussians with model selection, Step 2 tree,
-//! Step 3 joints), with progress reporting and cancellation through a callback.
+//! Step 3 joints), with progress reporting and cancellation through a callback, and
+//! the rules that choose among finished fits: the second look at model selection's
+//! runner-up, and the second attempt from another seed at a poorly explained fit.
 //! Nothing here depends on the browser: the worker and the CLI both drive it.
 
 use crate::math::Libm;
@@ -349,10 +351,11 @@ fn unexplained_share(result: &crate::io::result::FitResult) -> Option<f64> {
 /// [`SECOND_LOOK_RATIO`] times its share unexplained. bench-dev full, balanced, seeds
 /// 0–4 (35 fits), end to end, mean RI / recon / flow / TED / re-animation / joints in
 /// the bar: 0.902 / 0.612 / 0.592 / 1.857 / 1.619 / 86 → 0.903 / 0.540 / 0.521 / 1.486 /
-/// 1.536 / 92; 13 fits were done twice (talos on every seed; well fitted robots leave
-/// 0.1–0.6 %), 9 of them kept the second attempt. A bound of 0.6 % did 16 twice for
-/// about the same (flow 0.527), 1.0 % 12 (flow 0.528); taking the attempt with the
-/// lower share whatever the ratio, flow 0.526 but TED 1.571. The 35 fits took 1.46×
+/// 1.536 / 92; 13 fits were done twice (talos on every seed; finger_edu, panda_gripper
+/// and solo12 leave 0.1–0.4 % on every seed), 9 of them kept the second attempt. A
+/// bound of 0.6 % did 16 twice for about the same (flow 0.527), 1.0 % 12 (flow 0.528);
+/// taking the attempt with the lower share whatever the ratio, flow 0.526 but TED
+/// 1.571. The 35 fits took 1.46×
 /// the time (438 → 640 s; talos 12.3 → 25.0 s a sequence). Fast would gain too
 /// (flow 0.731 → 0.646, TED 1.63 → 1.71) but do 18 of its 35 fits twice, against the
 /// point of the preset; the paper preset keeps the paper's procedure. See
