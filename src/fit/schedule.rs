@@ -48,6 +48,18 @@ pub struct Schedule {
     /// 0.85, TED 2.43 vs 2.57, re-animation 2.65 vs 2.51 — differences at the level
     /// of seed noise — for about a fifth less time per candidate.
     pub searched_divisor: usize,
+    /// `searched_divisor` on occluded input, where the polish after the occluded search
+    /// also sets how well the Gaussians follow each frame's visible side (fewer merges,
+    /// finer labels; docs/DEVELOPMENT.md, sessions 39 and 43). Fast polishes a quarter
+    /// of its preset there, 300 iterations on robot-sized input like balanced, at no
+    /// measurable cost (the occluded polish is a one-way Chamfer on 512 points; 14 fits
+    /// took 4.95 s against 4.92 s a sequence): bench-dev occluded, fast, seeds 0–4, mean
+    /// RI / recon / flow / TED / re-animation with 100 iterations 0.784 / 6.77 / 7.50 /
+    /// 4.37 / 5.09, with 300 0.807 / 6.76 / 7.49 / 4.37 / 5.28; bench-dev partial (the
+    /// sequences fitted as occluded) 0.798 / 7.96 / 8.81 / 4.91 / 7.01 → 0.809 / 8.06 /
+    /// 8.89 / 5.14 / 7.09; procedural occluded (generator seeds 0–3) 0.729 / 7.72 / 5.21
+    /// / 4.45 / 4.10 → 0.722 / 6.94 / 4.69 / 4.90 / 3.65.
+    pub occluded_divisor: usize,
 }
 
 impl Schedule {
@@ -68,14 +80,15 @@ impl Schedule {
             Quality::Fast => 2,
             Quality::Balanced | Quality::Paper => 3,
         };
-        let (later_rotations, searched_divisor) = match q {
-            Quality::Fast => (1024, 12),
-            Quality::Balanced => (2048, 10),
-            Quality::Paper => (2048, 4),
+        let (later_rotations, searched_divisor, occluded_divisor) = match q {
+            Quality::Fast => (1024, 12, 4),
+            Quality::Balanced => (2048, 10, 10),
+            Quality::Paper => (2048, 4, 4),
         };
         Schedule {
             later_rotations,
             searched_divisor,
+            occluded_divisor,
             iters,
             emd_start,
             warmup: 200,

@@ -398,16 +398,22 @@ fn fit_once(
         cfg.motion_seg = None;
     }
     // After the global search the main loop only polishes: a fraction of the
-    // preset's iterations (`Schedule::searched_divisor`; unless the caller set a count).
+    // preset's iterations (`Schedule::searched_divisor`, on occluded input
+    // `occluded_divisor`; unless the caller set a count).
     let searched = cfg
         .pose_search
         .as_ref()
         .is_some_and(|o| !prep.occluded || o.occluded);
     if searched && opts.iters.is_none() {
+        let divisor = if prep.occluded {
+            cfg.sched.occluded_divisor
+        } else {
+            cfg.sched.searched_divisor
+        };
         cfg.sched = cfg
             .sched
             .clone()
-            .with_iters((cfg.sched.iters / cfg.sched.searched_divisor).max(100));
+            .with_iters((cfg.sched.iters / divisor).max(100));
     }
     if searched && prep.occluded {
         cfg.segment_iters = SEGMENT_ITERS;
@@ -1090,6 +1096,37 @@ mod size_rule_tests {
                 (u - 0.5).max(0.0) * a.lsin(),
             )
         })
+    }
+
+    /// After the pose search the main loop only polishes: fast a twelfth of its preset
+    /// on full input, but on occluded input a quarter, as long as balanced on
+    /// robot-sized input; then the segmenting copy's iterations.
+    #[test]
+    fn fast_polishes_occluded_frames_as_long_as_balanced() {
+        // Robot-sized (`is_small` false: point counts varying by more than 15 %, 6000
+        // in all), so both presets take their robot schedules.
+        let seq = bent_strip(&[1600, 1400, 2000, 1500]);
+        assert!(!is_small(&seq, 4096));
+        let iterations = |quality, occlusion| {
+            let opts = FitOptions {
+                quality,
+                occlusion,
+                ..FitOptions::default()
+            };
+            let prep = prepare(&seq, &opts).unwrap();
+            let r = run_candidate(&prep, 2, &opts, &mut |_| Control::Continue).unwrap();
+            r.iterations
+        };
+        assert_eq!(iterations(Quality::Fast, Occlusion::Off), 100);
+        assert_eq!(iterations(Quality::Balanced, Occlusion::Off), 300);
+        assert_eq!(
+            iterations(Quality::Fast, Occlusion::On),
+            300 + SEGMENT_ITERS
+        );
+        assert_eq!(
+            iterations(Quality::Balanced, Occlusion::On),
+            300 + SEGMENT_ITERS
+        );
     }
 
     #[test]
