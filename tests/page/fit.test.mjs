@@ -295,9 +295,12 @@ test('a poorly explained balanced fit is done again from another seed, as the CL
   const dir = path.join(ARTIFACTS, 'cabinet-seq');
   fs.rmSync(dir, { recursive: true, force: true });
   execFileSync(CLI, ['synth', 'cabinet', '--seed', '0', '--out', dir], { stdio: 'ignore' });
-  const { got, want, status } = await cliAndPage(dir, 'cabinet-retry', (page) => page.waitForFunction(
-    () => /of the points unexplained: fitting again from seed \d+/.test(document.querySelector('#fit-status').innerText),
-    null, { timeout: FIT_TIMEOUT }), { quality: 'balanced', parts: [3, 4] });
+  const { got, want, status } = await cliAndPage(dir, 'cabinet-retry', async (page) => {
+    await page.waitForFunction(
+      () => /of the points unexplained: fitting again from seed \d+/.test(document.querySelector('#fit-status').innerText),
+      null, { timeout: FIT_TIMEOUT });
+    await shot(page, 'fit-second-attempt');
+  }, { quality: 'balanced', parts: [3, 4] });
   assert.deepEqual(got.info.retry, want.info.retry, 'the same attempts and the same one kept');
   assert.equal(got.info.retry.first[0], 0);
   assert.match(status, new RegExp(`Fitted twice \\(seeds 0 and ${got.info.retry.second[0]}\\); the (first|second) was kept`));
