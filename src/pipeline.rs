@@ -384,7 +384,7 @@ pub struct RetryLook {
     /// For the result's notes.
     pub note: String,
     /// For the result's `info.retry`: `first` and `second` as `[seed, share]`, `taken`
-    /// the kept attempt's seed.
+    /// the kept attempt's seed, `step1_seconds` both attempts' Step-1 times.
     pub info: serde_json::Value,
 }
 
@@ -398,6 +398,13 @@ pub fn retry_look(
 ) -> Option<RetryLook> {
     let (u1, u2) = (unexplained_share(first)?, unexplained_share(second)?);
     let take_second = u1 > SECOND_LOOK_RATIO * u2;
+    let step1 = |r: &crate::io::result::FitResult| {
+        r.info
+            .as_ref()
+            .and_then(|i| i.get("step1_seconds"))
+            .cloned()
+            .unwrap_or(serde_json::Value::Null)
+    };
     let (s1, s2) = seeds;
     let lead = format!(
         "second attempt: the fit from seed {s1} left {:.2} % of the points unexplained (above {:.2} %), so the fit was done again from seed {s2}, which left {:.2} %",
@@ -413,7 +420,12 @@ pub fn retry_look(
     Some(RetryLook {
         take_second,
         note,
-        info: serde_json::json!({"first": [s1, u1], "second": [s2, u2], "taken": if take_second { s2 } else { s1 }}),
+        info: serde_json::json!({
+            "first": [s1, u1],
+            "second": [s2, u2],
+            "taken": if take_second { s2 } else { s1 },
+            "step1_seconds": [step1(first), step1(second)],
+        }),
     })
 }
 

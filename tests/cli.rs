@@ -309,6 +309,10 @@ fn a_poorly_explained_balanced_fit_is_done_again_from_another_seed() {
     assert!(u1 > gsart::pipeline::RETRY_UNEXPLAINED, "{retry}");
     let second = u1 > gsart::pipeline::SECOND_LOOK_RATIO * u2;
     assert_eq!(retry["taken"].as_u64(), if second { s2 } else { s1 });
+    let secs = retry["step1_seconds"]
+        .as_array()
+        .expect("both attempts' Step-1 times");
+    assert!(secs.len() == 2 && secs.iter().all(|t| t.as_f64().is_some_and(|t| t > 0.0)));
     let kept = info["unexplained"].as_f64().unwrap();
     assert_eq!(
         kept,
