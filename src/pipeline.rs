@@ -340,7 +340,7 @@ fn record_look(
 
 /// The share of points a finished full-input model leaves unexplained
 /// (`info.unexplained`), if the result has it.
-fn unexplained_share(result: &crate::io::result::FitResult) -> Option<f64> {
+pub fn unexplained_share(result: &crate::io::result::FitResult) -> Option<f64> {
     result.info.as_ref()?.get("unexplained")?.as_f64()
 }
 
@@ -437,24 +437,35 @@ pub fn record_retry(result: &mut crate::io::result::FitResult, look: &RetryLook)
 /// `retry_look` on two `FitOutput`s: the kept one, with the look recorded.
 #[cfg(not(target_arch = "wasm32"))]
 fn keep_after_retry(first: FitOutput, second: FitOutput, s1: u64, s2: u64) -> FitOutput {
-    let Some(look) = retry_look(&first.result, &second.result, (s1, s2)) else {
-        return first;
-    };
-    let mut kept = if look.take_second { second } else { first };
-    record_retry(&mut kept.result, &look);
-    kept.notes.push(look.note);
-    kept
+    match retry_look(&first.result, &second.result, (s1, s2)) {
+        Some(l) => keep_one(first, second, l.take_second, "retry", l.note, &l.info),
+        None => first,
+    }
 }
 
 /// `second_look` on two `FitOutput`s: the kept one, with the look recorded.
 #[cfg(not(target_arch = "wasm32"))]
 fn keep_after_second_look(best: FitOutput, runner: FitOutput) -> FitOutput {
-    let Some(look) = second_look(&best.result, &runner.result) else {
-        return best;
-    };
-    let mut kept = if look.take_runner { runner } else { best };
-    record_second_look(&mut kept.result, &look);
-    kept.notes.push(look.note);
+    match second_look(&best.result, &runner.result) {
+        Some(l) => keep_one(best, runner, l.take_runner, "second_look", l.note, &l.info),
+        None => best,
+    }
+}
+
+/// `b` when `take_b`, else `a`, with the look that chose it recorded in its result
+/// (under `key`, and its note) and in its notes.
+#[cfg(not(target_arch = "wasm32"))]
+fn keep_one(
+    a: FitOutput,
+    b: FitOutput,
+    take_b: bool,
+    key: &str,
+    note: String,
+    info: &serde_json::Value,
+) -> FitOutput {
+    let mut kept = if take_b { b } else { a };
+    record_look(&mut kept.result, key, &note, info);
+    kept.notes.push(note);
     kept
 }
 

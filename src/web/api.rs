@@ -294,15 +294,23 @@ pub fn second_look(best_json: &str, runner_json: &str) -> Result<JsValue, JsErro
     Ok(o.into())
 }
 
-/// The seed of a second attempt at the whole fit when the finished result (JSON),
-/// fitted with `options`, asks for one (`pipeline::retry_wanted`: balanced, full input,
-/// much of the clouds unexplained), or `undefined`.
+/// A second attempt at the whole fit when the finished result (JSON), fitted with
+/// `options`, asks for one (`pipeline::retry_wanted`: balanced, full input, much of the
+/// clouds unexplained): `{seed, unexplained}` (the seed to fit from, the first's share
+/// of points unexplained), or `undefined`.
 #[wasm_bindgen]
-pub fn retry_seed(result_json: &str, options: JsValue) -> Result<Option<f64>, JsError> {
+pub fn retry_seed(result_json: &str, options: JsValue) -> Result<JsValue, JsError> {
     let opts = options_from_js(options)?;
     let first = FitResult::from_json(result_json, "first attempt's result").map_err(js_err)?;
+    let Some(seed) = crate::pipeline::retry_wanted(&first, &opts) else {
+        return Ok(JsValue::UNDEFINED);
+    };
+    let share = crate::pipeline::unexplained_share(&first).unwrap_or(f64::NAN);
+    let o = Object::new();
     // Seeds stay below 2⁵³ (`pipeline::retry_seed`), so a JS number holds them exactly.
-    Ok(crate::pipeline::retry_wanted(&first, &opts).map(|s| s as f64))
+    set(&o, "seed", &JsValue::from_f64(seed as f64));
+    set(&o, "unexplained", &JsValue::from_f64(share));
+    Ok(o.into())
 }
 
 /// The core's look at two attempts (`pipeline::retry_look`), the first fitted with

@@ -675,11 +675,12 @@ async function startFit() {
     // A balanced fit of full input whose model leaves much of the clouds unexplained is
     // done once more from another seed, and the core keeps one (`pipeline::retry_wanted`,
     // `pipeline::retry_look`), as `gsart fit` does.
-    const seed = wasm.retry_seed(out.result, opts);
-    if (seed !== undefined && S.job === job) {
+    const retry = wasm.retry_seed(out.result, opts);
+    if (retry !== undefined && S.job === job) {
+      const { seed } = retry;
       const again = { ...opts, seed };
       const first = out;
-      const share = (100 * JSON.parse(first.result).info.unexplained).toFixed(2);
+      const share = (100 * retry.unexplained).toFixed(2);
       buildStages(!!gtOk);
       S.chart.clear('Step 1 loss');
       $('fit-status').innerHTML = `The model left ${share} % of the points unexplained: fitting again from seed ${again.seed}. ${trying}`;
