@@ -262,5 +262,7 @@ fn half_turned_link_is_repaired() {
     };
     let (res, _, _) = run(&seq, &no_repair);
     eprintln!("without the repair: part 3 off {:.3}", off(&res));
-    assert!(off(&res) > 2.0, "{}", off(&res));
+    // 2.58 before near-parallel axes were tied (session 44), 1.93 since: the tie
+    // straightens part of the half-turned link's hinge, the repair the rest (0.08).
+    assert!(off(&res) > 1.5, "{}", off(&res));
 }

@@ -14,6 +14,7 @@ use super::observed::{
     keep_faithful_poses, object_size, observed_motion, points_by_part, polish_motions,
     polish_poses, AGREE_SPACINGS, POLISH_GAIN, POLISH_KEEP, POLISH_ROUNDS,
 };
+use super::parallel::{parallel_groups, tie_axes, MAX_ANGLE_DEG};
 use super::project::{motions_from_canonical, project_joints, JointResidual};
 use super::refine::{refine, RefineOptions, RefineReport};
 use super::screw::{state_range, PartExtent};
@@ -55,6 +56,10 @@ pub struct KinOptions {
     /// symmetry axis the hinge perpendicular to that axis, where that fits the clouds
     /// as well (`kinematics::spin_free`).
     pub spin_free: bool,
+    /// After the refinement (and the spin-free hinges), tie the axes of related joints
+    /// that lie within `parallel::MAX_ANGLE_DEG` of each other to their mean
+    /// direction, where the model then fits the clouds as well (`kinematics::parallel`).
+    pub parallel: bool,
     /// The refinement keeps the root's observed motion when the root is still
     /// (`root_is_still`, with the merge threshold) instead of refining it. Meant for
     /// occluded input: there the refinement's Chamfer compares frame c's view with
@@ -91,6 +96,7 @@ impl Default for KinOptions {
             polish: true,
             flips: true,
             spin_free: true,
+            parallel: true,
             keep_still_root: false,
             absorb_invisible: true,
             restart_pairs: true,
@@ -130,6 +136,9 @@ pub struct KinReport {
     pub swept: usize,
     /// Hinges replaced by their spin-free version (`kinematics::spin_free`).
     pub spin_free: Vec<SpinFree>,
+    /// Groups of joints (by child part) whose axes were tied parallel
+    /// (`kinematics::parallel`).
+    pub parallel: Vec<Vec<usize>>,
     /// (stage, seconds) from the caller's clock.
     pub timings: Vec<(String, f64)>,
 }
@@ -403,6 +412,82 @@ fn spin_free_refined(
     Ok(Vec::new())
 }
 
+/// Ties near-parallel related joints (`kinematics::parallel`): refines the model with
+/// each group's axes tied to their mean direction and keeps the groups when the model's
+/// loss is at most `LOSS_SLACK` times the untied model's and every tied joint's
+/// subtree fits the clouds within `KEEP_SLACK` of before; the groups that fail the
+/// subtree test are left out and the rest tried once more. Returns the kept groups,
+/// each as its joints' child parts.
+fn parallel_refined(
+    result: &mut FitResult,
+    points: &[Vec<Vec3>],
+    grids: &[Grid],
+    ro: &RefineOptions,
+    limit_pad: f64,
+    progress: &mut dyn FnMut(&Progress) -> Control,
+) -> crate::Result<Vec<Vec<usize>>> {
+    const LOSS_SLACK: f64 = 1.01;
+    let Some(joints) = result.joints.as_ref() else {
+        return Ok(Vec::new());
+    };
+    let mut groups = parallel_groups(joints, MAX_ANGLE_DEG);
+    if groups.is_empty() {
+        return Ok(Vec::new());
+    }
+    // The untied model's loss on the refinement's evaluation sample.
+    let measure = RefineOptions {
+        iters: 0,
+        ..ro.clone()
+    };
+    let base_loss = refine(&mut result.clone(), points, &measure, limit_pad, progress)?.loss_before;
+    let c = result.canonical_frame;
+    let by_part = points_by_part(&points[c], &result.labels[c], result.parts);
+    for _ in 0..2 {
+        let mut alt = result.clone();
+        if let Some(js) = alt.joints.as_mut() {
+            tie_axes(js, &groups);
+        }
+        let tied = RefineOptions {
+            ties: groups.clone(),
+            ..ro.clone()
+        };
+        let rep = refine(&mut alt, points, &tied, limit_pad, progress)?;
+        let loss = if rep.accepted {
+            rep.loss_after
+        } else {
+            rep.loss_before
+        };
+        let children: Vec<Vec<usize>> = groups
+            .iter()
+            .map(|g| g.iter().map(|&j| joints[j].child).collect())
+            .collect();
+        let fails = |g: &Vec<usize>| {
+            g.iter().any(|&p| {
+                subtree_fit(&alt, grids, &by_part, p)
+                    > KEEP_SLACK * subtree_fit(result, grids, &by_part, p)
+            })
+        };
+        let failed: Vec<bool> = children.iter().map(fails).collect();
+        if !failed.contains(&true) {
+            if loss <= LOSS_SLACK * base_loss {
+                *result = alt;
+                return Ok(children);
+            }
+            return Ok(Vec::new());
+        }
+        groups = groups
+            .into_iter()
+            .zip(failed)
+            .filter(|(_, f)| !f)
+            .map(|(g, _)| g)
+            .collect();
+        if groups.is_empty() {
+            return Ok(Vec::new());
+        }
+    }
+    Ok(Vec::new())
+}
+
 /// Steps 2 and 3 from Step 1's output: working points `points[k]`, their part labels
 /// `labels[k]` and the part poses `poses[k][p]` (only relative motions matter).
 /// Returns the articulated model (labels relabelled to merged parts, one per input
@@ -429,7 +514,7 @@ pub fn build_articulated(
     }
     let mut merged = merge_parts(poses, &counts, &dist_in, &opts.merge);
     // Every frame's index, for the invisible-joint check and the spin-free hinges.
-    let grids: Vec<Grid> = if opts.absorb_invisible || opts.spin_free {
+    let grids: Vec<Grid> = if opts.absorb_invisible || opts.spin_free || opts.parallel {
         points.iter().map(|f| Grid::new(f)).collect()
     } else {
         Vec::new()
@@ -571,6 +656,16 @@ pub fn build_articulated(
         }
         _ => Vec::new(),
     };
+    let parallel = match refine_options(opts, &merged.poses, root) {
+        Some(ro) if opts.parallel => {
+            let t = clock();
+            let kept =
+                parallel_refined(&mut result, points, &grids, &ro, opts.limit_pad, progress)?;
+            refine_s += clock() - t;
+            kept
+        }
+        _ => Vec::new(),
+    };
     let canon_labels = result.labels[canonical].clone();
     let poses_replaced = match opts.pose_tolerance {
         Some(tol) => {
@@ -619,6 +714,7 @@ pub fn build_articulated(
         flips: flipped,
         swept,
         spin_free,
+        parallel,
         timings,
     };
     Ok((result, report))
@@ -690,16 +786,21 @@ mod tests {
                 vec![DMat4::IDENTITY, m]
             })
             .collect();
-        let points = poses
+        let points = moved(&base, &lab, &poses);
+        (points, vec![lab; k], poses)
+    }
+
+    /// Frame t's cloud: each of `base`'s points moved by its part's pose in frame t.
+    fn moved(base: &[Vec3], lab: &[u32], poses: &[Vec<DMat4>]) -> Vec<Vec<Vec3>> {
+        poses
             .iter()
             .map(|f| {
                 base.iter()
-                    .zip(&lab)
+                    .zip(lab)
                     .map(|(p, &l)| f[l as usize].transform_point3(p.as_dvec3()).as_vec3())
                     .collect()
             })
-            .collect();
-        (points, vec![lab; k], poses)
+            .collect()
     }
 
     /// `build_articulated` with no clock and no progress.
@@ -765,6 +866,64 @@ mod tests {
             restart_pairs: false,
             ..Default::default()
         }
+    }
+
+    /// A body with two legs hinged 8° apart (within `parallel::MAX_ANGLE_DEG`), swung
+    /// far enough for the clouds to show it: tying the two axes would fit the clouds
+    /// worse, so they stay as fitted.
+    #[test]
+    fn hinges_the_clouds_show_apart_are_not_tied() {
+        use crate::math::Libm;
+        let k = 6;
+        let mut base = Vec::new();
+        let mut lab = Vec::new();
+        for i in 0..24 {
+            for j in 0..6 {
+                base.push(Vec3::new(i as f32 * 0.04, j as f32 * 0.04, 0.0));
+                lab.push(0u32);
+            }
+        }
+        for (leg, x0) in [(1u32, 0.02f32), (2, 0.90)] {
+            for i in 0..12 {
+                for j in 0..4 {
+                    base.push(Vec3::new(
+                        x0 + (j % 2) as f32 * 0.04,
+                        j as f32 * 0.04,
+                        -0.04 - i as f32 * 0.04,
+                    ));
+                    lab.push(leg);
+                }
+            }
+        }
+        let tilt = |deg: f64| DVec3::new(deg.to_radians().lsin(), deg.to_radians().lcos(), 0.0);
+        let hinges = [
+            (tilt(4.0), DVec3::new(0.04, 0.0, -0.02)),
+            (tilt(-4.0), DVec3::new(0.92, 0.0, -0.02)),
+        ];
+        let poses: Vec<Vec<DMat4>> = (0..k)
+            .map(|t| {
+                let q = [0.3 * t as f64, -0.25 * t as f64];
+                let mut f = vec![DMat4::IDENTITY];
+                for (h, (axis, pivot)) in hinges.iter().enumerate() {
+                    f.push(super::super::chain::screw_exp(
+                        JointType::Revolute,
+                        *axis,
+                        *pivot,
+                        q[h],
+                    ));
+                }
+                f
+            })
+            .collect();
+        let points = moved(&base, &lab, &poses);
+        let (res, report) =
+            build(&points, &vec![lab; k], &poses, 0, &KinOptions::default()).unwrap();
+        let js = res.joints.as_ref().unwrap();
+        assert_eq!(js.len(), 2);
+        let (a, b) = (DVec3::from_array(js[0].axis), DVec3::from_array(js[1].axis));
+        let apart = a.dot(b).abs().min(1.0).lacos().to_degrees();
+        assert!(report.parallel.is_empty(), "{:?}", report.parallel);
+        assert!((apart - 8.0).abs() < 1.0, "axes {apart}° apart");
     }
 
     #[test]

@@ -10,6 +10,7 @@ pub mod invisible_joints;
 pub mod joint_sweep;
 pub mod merge;
 pub mod observed;
+pub mod parallel;
 pub mod project;
 pub mod refine;
 pub mod relabel;

@@ -86,6 +86,10 @@ pub struct RefineOptions {
     /// change of 1 %. At 1e-4 the prior costs 1.2e-6 for a 2° correction, against the
     /// 5e-4 the procedural laptop's 2° correction gains.
     pub axis_prior: f64,
+    /// Groups of joints (indices into the result's joints) whose axes stay parallel:
+    /// after every step each group's axes are set to their sign-aligned mean
+    /// (`kinematics::parallel`). Empty: every axis free.
+    pub ties: Vec<Vec<usize>>,
 }
 
 impl Default for RefineOptions {
@@ -101,6 +105,7 @@ impl Default for RefineOptions {
             lambda_emd: 0.0,
             emd_sample: 192,
             emd_every: 20,
+            ties: Vec::new(),
         }
     }
 }
@@ -430,6 +435,36 @@ pub(crate) fn loss_grad(
     total
 }
 
+/// Makes the axes of each group in `ties` parallel: each is set to the group's mean
+/// direction (every axis flipped to agree with the group's first, weighted by
+/// `parallel::weight` of its states), keeping its own sense and length. Out-of-range indices are ignored.
+pub(crate) fn tie_axes(m: &Model, x: &mut [f64], ties: &[Vec<usize>]) {
+    let n = m.types.len();
+    for group in ties {
+        let members: Vec<usize> = group.iter().copied().filter(|&j| j < n).collect();
+        let Some(&first) = members.first() else {
+            continue;
+        };
+        let reference = Model::v3(x, m.joint_base(first)).normalize_or(DVec3::Z);
+        let sense = |a: DVec3| if a.dot(reference) < 0.0 { -1.0 } else { 1.0 };
+        let mean = members
+            .iter()
+            .map(|&j| {
+                let b = m.joint_base(j);
+                let a = Model::v3(x, b).normalize_or(DVec3::Z);
+                a * sense(a) * super::parallel::weight(&x[b + 6..b + 6 + m.k])
+            })
+            .fold(DVec3::ZERO, |s, a| s + a)
+            .normalize_or(reference);
+        for &j in &members {
+            let b = m.joint_base(j);
+            let a = Model::v3(x, b);
+            let v = mean * sense(a) * a.length().max(1e-12);
+            x[b..b + 3].copy_from_slice(&v.to_array());
+        }
+    }
+}
+
 /// Axis prior Σⱼ w·(1 − (âⱼ·â⁰ⱼ)²) over revolute joints (unit axes, sign-free); adds its
 /// gradient to `grad`. Slides are left free: a slide's axis shows directly in the
 /// displacement of its whole part (bench-dev panda_gripper: the refinement corrects the
@@ -579,6 +614,7 @@ pub fn refine(
     let mut matching = None;
 
     let mut x = x0.clone();
+    tie_axes(&m, &mut x, &opts.ties);
     let (mut mo, mut ve) = (vec![0.0; x.len()], vec![0.0; x.len()]);
     let mut g = vec![0.0; x.len()];
     let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-8);
@@ -614,6 +650,7 @@ pub fn refine(
             ve[i] = b2 * ve[i] + (1.0 - b2) * g[i] * g[i];
             x[i] -= lr * (mo[i] / c1) / ((ve[i] / c2).sqrt() + eps);
         }
+        tie_axes(&m, &mut x, &opts.ties);
         if it % 25 == 0 || it + 1 == opts.iters {
             let p = Progress {
                 stage: Stage::Joints,
@@ -850,5 +887,89 @@ mod tests {
                 assert!(a.abs_diff_eq(from_row_major(b), 1e-9));
             }
         }
+    }
+
+    /// Two legs hinged to a body about parallel axes (y), each leg a slab 0.4 long;
+    /// the model starts with the legs' axes 6° off either way. Refined with the two
+    /// joints tied, both axes come out exactly parallel and nearer y than they started.
+    #[test]
+    fn tied_axes_stay_parallel_through_the_refinement() {
+        let k = 5;
+        let mut rng = StdRng::seed_from_u64(9);
+        let mut pts = Vec::new();
+        let mut labels = Vec::new();
+        for i in 0..900 {
+            let part = i % 3;
+            let u = Vec3::new(rng.random(), rng.random(), rng.random());
+            let p = match part {
+                0 => Vec3::new(0.6 * u.x - 0.3, 0.3 * u.y - 0.15, 0.1 * u.z),
+                1 => Vec3::new(-0.3 + 0.05 * u.x, 0.1 * u.y - 0.05, -0.4 * u.z),
+                _ => Vec3::new(0.25 + 0.05 * u.x, 0.1 * u.y - 0.05, -0.4 * u.z),
+            };
+            pts.push(p);
+            labels.push(part as u32);
+        }
+        let hinge = |child: usize, x: f64, axis: DVec3, state: Vec<f64>| ResultJoint {
+            child,
+            parent: 0,
+            joint_type: JointType::Revolute,
+            axis: axis.to_array(),
+            pivot: [x, 0.0, 0.0],
+            state,
+            limits: [-0.8, 0.8],
+        };
+        let states1: Vec<f64> = (0..k).map(|t| 0.35 * t as f64 - 0.7).collect();
+        let states2: Vec<f64> = (0..k).map(|t| 0.7 - 0.3 * t as f64).collect();
+        let zero = |s: &[f64]| s.iter().map(|q| q - s[0]).collect::<Vec<f64>>();
+        let truth = [
+            hinge(1, -0.275, DVec3::Y, zero(&states1)),
+            hinge(2, 0.275, DVec3::Y, zero(&states2)),
+        ];
+        let tilt = |deg: f64| DVec3::new(deg.to_radians().lsin(), deg.to_radians().lcos(), 0.0);
+        let start = [
+            hinge(1, -0.275, tilt(6.0), zero(&states1)),
+            hinge(2, 0.275, tilt(-6.0), zero(&states2)),
+        ];
+        let result = |joints: &[ResultJoint]| FitResult {
+            format: FORMAT.into(),
+            version: VERSION,
+            frames: k,
+            canonical_frame: 0,
+            parts: 3,
+            labels: vec![labels.clone(); k],
+            poses: vec![vec![[0.0; 16]; 3]; k],
+            gaussians: None,
+            tree: Some(ResultTree {
+                root: 0,
+                parent: vec![-1, 0, 0],
+            }),
+            joints: Some(joints.to_vec()),
+            root_motion: Some(vec![to_row_major(&DMat4::IDENTITY); k]),
+            points: None,
+            info: None,
+        };
+        let (m, x) = model_from_result(&result(&truth), false).unwrap();
+        let frames: Vec<Vec<Vec3>> = (0..k)
+            .map(|t| {
+                let p = m.poses(&x, t);
+                pts.iter()
+                    .zip(&labels)
+                    .map(|(s, &l)| p[l as usize].transform_point3(s.as_dvec3()).as_vec3())
+                    .collect()
+            })
+            .collect();
+        let mut res = result(&start);
+        let opts = RefineOptions {
+            root: false,
+            ties: vec![vec![0, 1]],
+            ..Default::default()
+        };
+        let rep = refine(&mut res, &frames, &opts, 0.0, &mut |_| Control::Continue).unwrap();
+        assert!(rep.accepted, "{rep:?}");
+        let js = res.joints.as_ref().unwrap();
+        let (a, b) = (DVec3::from_array(js[0].axis), DVec3::from_array(js[1].axis));
+        assert!(a.dot(b).abs() > 1.0 - 1e-12, "{a} vs {b}");
+        let off = a.dot(DVec3::Y).abs().min(1.0).lacos().to_degrees();
+        assert!(off < 2.0, "tied axis {off}° off y (started 6° off)");
     }
 }

@@ -1,0 +1,192 @@
+//! Parallel joint axes (an addition to Step 3). Made objects put their joints on
+//! parallel axes far more often than a few degrees apart: a quadruped's hips and knees,
+//! the pitch joints of an arm's shoulder and elbow, a finger's flexion joints, a
+//! cabinet's drawers. Each joint's axis is fitted to its own part's motion, and a
+//! part turned through half a radian, or a link that is nearly round about its own
+//! axis, leaves that axis 5–10° off although the clouds cannot tell the two apart.
+//!
+//! Joints that are related — two joints of one parent part, or a joint and its child
+//! part's joint — of one type, whose axes lie within `MAX_ANGLE_DEG` of each other,
+//! form a group (joined transitively). Parallel axes stay parallel at every state: a
+//! sibling pair's axes are both fixed in their parent, and a child's axis parallel to
+//! its parent joint's is turned only about itself. `kinematics::build` refines the
+//! model with each group's axes tied to their mean direction
+//! (`RefineOptions::ties`) and keeps the groups only where the model still fits the
+//! clouds as well as without them.
+
+use petgraph::unionfind::UnionFind;
+
+use crate::math::Libm;
+
+use crate::io::result::ResultJoint;
+
+/// Axes within this angle (degrees) of a related joint's are tried as parallel.
+pub const MAX_ANGLE_DEG: f64 = 10.0;
+
+/// Groups (two or more joints, indices into `joints`) of related joints of one type
+/// whose axes lie within `max_deg` of each other, joined transitively; each group
+/// sorted, groups in order of their first member.
+pub fn parallel_groups(joints: &[ResultJoint], max_deg: f64) -> Vec<Vec<usize>> {
+    let n = joints.len();
+    let min_cos = max_deg.to_radians().lcos();
+    let mut sets = UnionFind::<usize>::new(n);
+    for a in 0..n {
+        for b in a + 1..n {
+            let (ja, jb) = (&joints[a], &joints[b]);
+            let related = ja.parent == jb.parent || ja.child == jb.parent || jb.child == ja.parent;
+            if !related || ja.joint_type != jb.joint_type {
+                continue;
+            }
+            if cos_between(ja.axis, jb.axis).abs() >= min_cos {
+                sets.union(a, b);
+            }
+        }
+    }
+    let labels = sets.into_labeling();
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for i in 0..n {
+        if let Some(g) = groups.iter_mut().find(|g| labels[g[0]] == labels[i]) {
+            g.push(i);
+        } else {
+            groups.push(vec![i]);
+        }
+    }
+    groups.retain(|g| g.len() >= 2);
+    groups
+}
+
+fn cos_between(a: [f64; 3], b: [f64; 3]) -> f64 {
+    let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let na = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    let nb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
+    if na < 1e-12 || nb < 1e-12 {
+        return 0.0;
+    }
+    dot / (na * nb)
+}
+
+/// A joint's weight in its group's mean direction: the square of its state range. A
+/// hinge seen over a wider swing has a better determined axis (procedural quadruped,
+/// fast, generator seeds 0–3, the found axes set to their group's mean without a
+/// refinement: median axis error 3.3° → 1.9° with equal weights, 1.4° with these).
+pub fn weight(states: &[f64]) -> f64 {
+    let (lo, hi) = states
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &q| {
+            (lo.min(q), hi.max(q))
+        });
+    if hi > lo {
+        (hi - lo) * (hi - lo) + 1e-12
+    } else {
+        1e-12
+    }
+}
+
+/// Sets the axes of each group to the group's mean direction (weighted by `weight`,
+/// each axis keeping its sense), as the refinement's ties do; pivots and states are
+/// left to the refinement.
+pub fn tie_axes(joints: &mut [ResultJoint], groups: &[Vec<usize>]) {
+    for g in groups {
+        let Some(&first) = g.first() else { continue };
+        let reference = joints[first].axis;
+        let sense = |a: [f64; 3]| {
+            if cos_between(a, reference) < 0.0 {
+                -1.0
+            } else {
+                1.0
+            }
+        };
+        let mut mean = [0.0; 3];
+        for &j in g {
+            let a = joints[j].axis;
+            let w = sense(a) * weight(&joints[j].state) / norm(a);
+            for i in 0..3 {
+                mean[i] += w * a[i];
+            }
+        }
+        let n = norm(mean);
+        if n < 1e-12 {
+            continue;
+        }
+        for &j in g {
+            let s = sense(joints[j].axis);
+            joints[j].axis = [s * mean[0] / n, s * mean[1] / n, s * mean[2] / n];
+        }
+    }
+}
+
+fn norm(a: [f64; 3]) -> f64 {
+    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt().max(1e-12)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::gt::JointType;
+
+    fn joint(child: usize, parent: usize, t: JointType, axis: [f64; 3]) -> ResultJoint {
+        ResultJoint {
+            child,
+            parent,
+            joint_type: t,
+            axis,
+            pivot: [0.0; 3],
+            state: vec![0.0, 0.3],
+            limits: [0.0, 0.3],
+        }
+    }
+
+    fn tilted(deg: f64) -> [f64; 3] {
+        let r = deg.to_radians();
+        [r.lsin(), r.lcos(), 0.0]
+    }
+
+    #[test]
+    fn related_near_parallel_joints_of_one_type_are_grouped() {
+        use JointType::{Prismatic as P, Revolute as R};
+        // Body 0 with two legs (1 → 2 and 3 → 4) on y, a tail 5 on z, a sliding
+        // part 6 on y, and a leg joint 7 → 8 beyond leg 1's knee but unrelated to it.
+        let joints = vec![
+            joint(1, 0, R, tilted(3.0)),
+            joint(2, 1, R, tilted(-4.0)),
+            joint(3, 0, R, [0.0, -1.0, 0.05]), // opposite sense, ~3° off
+            joint(4, 3, R, tilted(25.0)),      // too far from its parent's
+            joint(5, 0, R, [0.0, 0.0, 1.0]),   // perpendicular
+            joint(6, 0, P, [0.0, 1.0, 0.0]),   // another type
+            joint(8, 7, R, [0.0, 1.0, 0.0]),   // not related to any
+        ];
+        let groups = parallel_groups(&joints, MAX_ANGLE_DEG);
+        assert_eq!(groups, vec![vec![0, 1, 2]]);
+    }
+
+    #[test]
+    fn a_wider_swing_weighs_more() {
+        let mut joints = vec![
+            joint(1, 0, JointType::Revolute, tilted(4.0)),
+            joint(2, 0, JointType::Revolute, tilted(-4.0)),
+        ];
+        joints[1].state = vec![0.0, 0.9];
+        tie_axes(&mut joints, &[vec![0, 1]]);
+        // Weights 0.09 and 0.81: the mean leans towards the second axis.
+        let got = joints[0].axis[0].latan2(joints[0].axis[1]).to_degrees();
+        assert!(got < -2.0 && got > -4.0, "{got}°");
+        assert_eq!(joints[0].axis, joints[1].axis);
+    }
+
+    #[test]
+    fn tied_axes_are_the_mean_direction_each_in_its_own_sense() {
+        let mut joints = vec![
+            joint(1, 0, JointType::Revolute, tilted(4.0)),
+            joint(2, 0, JointType::Revolute, {
+                let a = tilted(-2.0);
+                [-a[0], -a[1], -a[2]]
+            }),
+        ];
+        tie_axes(&mut joints, &[vec![0, 1]]);
+        let want = tilted(1.0);
+        for (i, w) in want.iter().enumerate() {
+            assert!((joints[0].axis[i] - w).abs() < 1e-12);
+            assert!((joints[1].axis[i] + w).abs() < 1e-12);
+        }
+    }
+}
