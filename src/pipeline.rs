@@ -761,6 +761,21 @@ pub fn finish(
             "{invisible} joint(s) absorbed into their parent: each turned its part a quarter turn or more without moving its points (pieces of one nearly symmetric part)"
         ));
     }
+    if !kin.parallel.is_empty() {
+        let groups: Vec<String> = kin
+            .parallel
+            .iter()
+            .map(|g| {
+                let parts: Vec<String> = g.iter().map(usize::to_string).collect();
+                parts.join(", ")
+            })
+            .collect();
+        notes.push(format!(
+            "joint axes made parallel (groups by child part: {}): as fitted they lay within {}° of each other, and the clouds fit the parallel axes as well",
+            groups.join("; "),
+            crate::kinematics::parallel::MAX_ANGLE_DEG
+        ));
+    }
     if kin.swept > 0 {
         notes.push(format!(
             "{} part poses were replaced by a pose found along their joints (a better fit to the cloud, or one as good on a smoother path of joint states)",
@@ -788,6 +803,7 @@ pub fn finish(
         "symmetry_turns": kin.flips,
         "joint_sweeps": kin.swept,
         "invisible_joints": invisible,
+        "parallel_axes": kin.parallel,
         "refine": kin.refine,
         "notes": notes,
     }));

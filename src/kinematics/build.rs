@@ -513,7 +513,8 @@ pub fn build_articulated(
         counts[*l as usize] += 1;
     }
     let mut merged = merge_parts(poses, &counts, &dist_in, &opts.merge);
-    // Every frame's index, for the invisible-joint check and the spin-free hinges.
+    // Every frame's index, for the invisible-joint check, the spin-free hinges and the
+    // parallel axes.
     let grids: Vec<Grid> = if opts.absorb_invisible || opts.spin_free || opts.parallel {
         points.iter().map(|f| Grid::new(f)).collect()
     } else {
