@@ -442,6 +442,16 @@ fn parallel_refined(
     let base_loss = refine(&mut result.clone(), points, &measure, limit_pad, progress)?.loss_before;
     let c = result.canonical_frame;
     let by_part = points_by_part(&points[c], &result.labels[c], result.parts);
+    // Each tied joint's subtree fit before the tie (`subtree_fit`), by child part.
+    let before: Vec<(usize, f64)> = groups
+        .iter()
+        .flatten()
+        .map(|&j| {
+            let p = joints[j].child;
+            (p, subtree_fit(result, grids, &by_part, p))
+        })
+        .collect();
+    let fit_before = |p: usize| before.iter().find(|e| e.0 == p).map_or(0.0, |e| e.1);
     for _ in 0..2 {
         let mut alt = result.clone();
         if let Some(js) = alt.joints.as_mut() {
@@ -462,10 +472,8 @@ fn parallel_refined(
             .map(|g| g.iter().map(|&j| joints[j].child).collect())
             .collect();
         let fails = |g: &Vec<usize>| {
-            g.iter().any(|&p| {
-                subtree_fit(&alt, grids, &by_part, p)
-                    > KEEP_SLACK * subtree_fit(result, grids, &by_part, p)
-            })
+            g.iter()
+                .any(|&p| subtree_fit(&alt, grids, &by_part, p) > KEEP_SLACK * fit_before(p))
         };
         let failed: Vec<bool> = children.iter().map(fails).collect();
         if !failed.contains(&true) {

@@ -14,6 +14,7 @@
 //! (`RefineOptions::ties`) and keeps the groups only where the model still fits the
 //! clouds as well as without them.
 
+use glam::DVec3;
 use petgraph::unionfind::UnionFind;
 
 use crate::math::Libm;
@@ -37,7 +38,8 @@ pub fn parallel_groups(joints: &[ResultJoint], max_deg: f64) -> Vec<Vec<usize>> 
             if !related || ja.joint_type != jb.joint_type {
                 continue;
             }
-            if cos_between(ja.axis, jb.axis).abs() >= min_cos {
+            let (u, v) = (unit(ja.axis), unit(jb.axis));
+            if u.dot(v).abs() >= min_cos {
                 sets.union(a, b);
             }
         }
@@ -55,14 +57,8 @@ pub fn parallel_groups(joints: &[ResultJoint], max_deg: f64) -> Vec<Vec<usize>> 
     groups
 }
 
-fn cos_between(a: [f64; 3], b: [f64; 3]) -> f64 {
-    let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    let na = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-    let nb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
-    if na < 1e-12 || nb < 1e-12 {
-        return 0.0;
-    }
-    dot / (na * nb)
+fn unit(a: [f64; 3]) -> DVec3 {
+    DVec3::from_array(a).normalize_or_zero()
 }
 
 /// A joint's weight in its group's mean direction: the square of its state range. A
@@ -82,41 +78,44 @@ pub fn weight(states: &[f64]) -> f64 {
     }
 }
 
-/// Sets the axes of each group to the group's mean direction (weighted by `weight`,
-/// each axis keeping its sense), as the refinement's ties do; pivots and states are
-/// left to the refinement.
-pub fn tie_axes(joints: &mut [ResultJoint], groups: &[Vec<usize>]) {
-    for g in groups {
-        let Some(&first) = g.first() else { continue };
-        let reference = joints[first].axis;
-        let sense = |a: [f64; 3]| {
-            if cos_between(a, reference) < 0.0 {
-                -1.0
-            } else {
-                1.0
-            }
-        };
-        let mut mean = [0.0; 3];
-        for &j in g {
-            let a = joints[j].axis;
-            let w = sense(a) * weight(&joints[j].state) / norm(a);
-            for i in 0..3 {
-                mean[i] += w * a[i];
-            }
-        }
-        let n = norm(mean);
-        if n < 1e-12 {
-            continue;
-        }
-        for &j in g {
-            let s = sense(joints[j].axis);
-            joints[j].axis = [s * mean[0] / n, s * mean[1] / n, s * mean[2] / n];
-        }
+/// The tied direction of a group of axes (each with its joint's states): their mean
+/// weighted by `weight`, every axis flipped to agree with the first; and each axis's
+/// sense against it (±1), which the tied axis keeps. `None` for an empty group.
+/// `tie_axes` and the refinement's ties (`refine::RefineOptions::ties`) both use it.
+pub fn tied_direction<'a>(
+    axes: impl Iterator<Item = (DVec3, &'a [f64])>,
+) -> Option<(DVec3, Vec<f64>)> {
+    let mut reference = None;
+    let mut senses = Vec::new();
+    let mut sum = DVec3::ZERO;
+    for (a, states) in axes {
+        let a = a.normalize_or(DVec3::Z);
+        let r = *reference.get_or_insert(a);
+        let s = if a.dot(r) < 0.0 { -1.0 } else { 1.0 };
+        senses.push(s);
+        sum += a * s * weight(states);
     }
+    let reference = reference?;
+    Some((sum.normalize_or(reference), senses))
 }
 
-fn norm(a: [f64; 3]) -> f64 {
-    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt().max(1e-12)
+/// Sets the axes of each group to its `tied_direction`, as the refinement's ties do;
+/// pivots and states are left to the refinement.
+pub fn tie_axes(joints: &mut [ResultJoint], groups: &[Vec<usize>]) {
+    for g in groups {
+        let axes = g.iter().map(|&j| {
+            (
+                DVec3::from_array(joints[j].axis),
+                joints[j].state.as_slice(),
+            )
+        });
+        let Some((dir, senses)) = tied_direction(axes) else {
+            continue;
+        };
+        for (&j, s) in g.iter().zip(senses) {
+            joints[j].axis = (dir * s).to_array();
+        }
+    }
 }
 
 #[cfg(test)]

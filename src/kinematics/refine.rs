@@ -435,31 +435,23 @@ pub(crate) fn loss_grad(
     total
 }
 
-/// Makes the axes of each group in `ties` parallel: each is set to the group's mean
-/// direction (every axis flipped to agree with the group's first, weighted by
-/// `parallel::weight` of its states), keeping its own sense and length. Out-of-range indices are ignored.
+/// Makes the axes of each group in `ties` parallel: each is set to the group's
+/// `parallel::tied_direction` (from its states' ranges), keeping its own sense and
+/// length. Out-of-range indices are ignored.
 pub(crate) fn tie_axes(m: &Model, x: &mut [f64], ties: &[Vec<usize>]) {
     let n = m.types.len();
     for group in ties {
         let members: Vec<usize> = group.iter().copied().filter(|&j| j < n).collect();
-        let Some(&first) = members.first() else {
+        let axes = members.iter().map(|&j| {
+            let b = m.joint_base(j);
+            (Model::v3(x, b), &x[b + 6..b + 6 + m.k])
+        });
+        let Some((dir, senses)) = super::parallel::tied_direction(axes) else {
             continue;
         };
-        let reference = Model::v3(x, m.joint_base(first)).normalize_or(DVec3::Z);
-        let sense = |a: DVec3| if a.dot(reference) < 0.0 { -1.0 } else { 1.0 };
-        let mean = members
-            .iter()
-            .map(|&j| {
-                let b = m.joint_base(j);
-                let a = Model::v3(x, b).normalize_or(DVec3::Z);
-                a * sense(a) * super::parallel::weight(&x[b + 6..b + 6 + m.k])
-            })
-            .fold(DVec3::ZERO, |s, a| s + a)
-            .normalize_or(reference);
-        for &j in &members {
+        for (&j, s) in members.iter().zip(senses) {
             let b = m.joint_base(j);
-            let a = Model::v3(x, b);
-            let v = mean * sense(a) * a.length().max(1e-12);
+            let v = dir * s * Model::v3(x, b).length().max(1e-12);
             x[b..b + 3].copy_from_slice(&v.to_array());
         }
     }
