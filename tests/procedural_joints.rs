@@ -205,36 +205,44 @@ fn cabinet_comes_apart_into_its_moving_parts() {
     assert!(j.type_correct >= 2, "{j:?}");
 }
 
-/// The quadruped (generator seed 0): the right tree, and its legs' hinges along their
-/// true axes. Its legs are capsules, which Step 1 leaves turned about their own long
-/// axes, and over their short swings (the hind-left thigh: 35° at most) that turn mixed
-/// into the hinge axes (up to 64° off) until the repair preferred the hinge that carries
-/// a leg's axis about a great circle (`flips::great_circle_hinge`). Six of the eight
-/// hinges met the bar (axis ≤ 5°, pivot ≤ 2) once the refinement sampled 2048
-/// points a frame (four with 1024: pivots 4.1 and 2.6, axes 5.6° and 10.3°); all eight
-/// do since near-parallel hinges are tied (`kinematics::parallel`: axes 1.8–10.3° →
-/// 1.2–1.9°).
+/// The quadruped (generator seeds 0 and 5): the right tree, and its legs' hinges along
+/// their true axes. Its legs are capsules, which Step 1 leaves turned about their own
+/// long axes, and over their short swings (the hind-left thigh: 35° at most) that turn
+/// mixed into the hinge axes (up to 64° off) until the repair preferred the hinge that
+/// carries a leg's axis about a great circle (`flips::great_circle_hinge`). Six of seed
+/// 0's eight hinges met the bar (axis ≤ 5°, pivot ≤ 2) once the refinement
+/// sampled 2048 points a frame (four with 1024: pivots 4.1 and 2.6, axes 5.6° and
+/// 10.3°); all eight since near-parallel hinges are tied (`kinematics::parallel`: axes
+/// 1.8–10.3° → 1.2–1.9°). Seed 5's eight came out 1.2–58° off (none in the bar) until
+/// the spin-free hinges' axes were left free of the refinement's axis prior and a
+/// related outlier could follow a tied group (session 45: all eight at 1.1°).
 #[test]
 fn quadruped_legs_hinge_about_their_true_axes() {
-    let (parts, m) = fit_and_evaluate(ObjectKind::Quadruped, 0);
-    let j = m.joints.as_ref().expect("joint errors");
-    let axes: Vec<f64> = j.per_joint.iter().filter_map(|x| x.axis_deg).collect();
-    eprintln!(
-        "quadruped: parts {parts} RI {:.3} recon {:.2} TED {:?} joints found {}/{} types {} axes {axes:.1?}°",
-        m.mean_ri, m.reconstruction_error, m.tree_edit_distance, j.found, j.joints, j.type_correct,
-    );
-    assert_eq!(m.tree_edit_distance, Some(0), "{m:?}");
-    assert_eq!((j.found, j.type_correct), (8, 8), "{j:?}");
-    let pivots: Vec<Option<f64>> = j.per_joint.iter().map(|x| x.pivot_error).collect();
-    let in_bar = j
-        .per_joint
-        .iter()
-        .filter(|x| x.axis_deg.is_some_and(|a| a <= 5.0) && x.pivot_error.is_some_and(|p| p <= 2.0))
-        .count();
-    assert_eq!(
-        in_bar, 8,
-        "{in_bar} of the 8 hinges within 5° and a pivot error of 2: axes {axes:.1?}, pivots {pivots:.1?}"
-    );
+    let mut failures = Vec::new();
+    for seed in [0, 5] {
+        let (parts, m) = fit_and_evaluate(ObjectKind::Quadruped, seed);
+        let j = m.joints.as_ref().expect("joint errors");
+        let axes: Vec<f64> = j.per_joint.iter().filter_map(|x| x.axis_deg).collect();
+        let pivots: Vec<Option<f64>> = j.per_joint.iter().map(|x| x.pivot_error).collect();
+        eprintln!(
+            "quadruped seed {seed}: parts {parts} RI {:.3} recon {:.2} TED {:?} joints found {}/{} types {} axes {axes:.1?}° pivots {pivots:.2?}",
+            m.mean_ri, m.reconstruction_error, m.tree_edit_distance, j.found, j.joints, j.type_correct,
+        );
+        let in_bar = j
+            .per_joint
+            .iter()
+            .filter(|x| {
+                x.axis_deg.is_some_and(|a| a <= 5.0) && x.pivot_error.is_some_and(|p| p <= 2.0)
+            })
+            .count();
+        if m.tree_edit_distance != Some(0) || (j.found, j.type_correct) != (8, 8) || in_bar != 8 {
+            failures.push(format!(
+                "seed {seed}: TED {:?}, {} found, {} types right, {in_bar} of 8 within 5° and a pivot error of 2: axes {axes:.1?}, pivots {pivots:.1?}",
+                m.tree_edit_distance, j.found, j.type_correct
+            ));
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
 }
 
 /// The quadruped with generator seed 1: every thigh keeps a part of its own. A Step-1

@@ -14,7 +14,7 @@ use super::observed::{
     keep_faithful_poses, object_size, observed_motion, points_by_part, polish_motions,
     polish_poses, AGREE_SPACINGS, POLISH_GAIN, POLISH_KEEP, POLISH_ROUNDS,
 };
-use super::parallel::{parallel_groups, tie_axes, MAX_ANGLE_DEG};
+use super::parallel::{followers, parallel_groups, tie_axes, FOLLOW_ANGLE_DEG, MAX_ANGLE_DEG};
 use super::project::{motions_from_canonical, project_joints, JointResidual};
 use super::refine::{refine, RefineOptions, RefineReport};
 use super::screw::{state_range, PartExtent};
@@ -353,9 +353,9 @@ fn refine_options(opts: &KinOptions, poses: &[Vec<DMat4>], root: usize) -> Optio
 }
 
 /// Proposes spin-free hinges for symmetric parts (`kinematics::spin_free`), refines
-/// the model again from there (so pivots and states follow the new axes, held near
-/// them by the axis prior), and keeps the proposals whose subtree still fits the
-/// clouds within `KEEP_SLACK` of the first refinement's, when the model's loss is no
+/// the model again from there (pivots, states and the new axes themselves, which the
+/// axis prior leaves free: `RefineOptions::free_axes`), and keeps the proposals whose
+/// subtree still fits the clouds within `KEEP_SLACK` of the first refinement's, when the model's loss is no
 /// worse than `LOSS_SLACK` times the first refinement's. The proposals that fail are
 /// left out and the rest tried once more.
 fn spin_free_refined(
@@ -384,7 +384,14 @@ fn spin_free_refined(
         if changes.is_empty() {
             return Ok(Vec::new());
         }
-        let rep = refine(&mut alt, points, ro, limit_pad, progress)?;
+        // The new hinges' axes are constructed, not projected: the prior would hold
+        // them where the images of their symmetry axes left them (5–13° off on the
+        // procedural quadruped), so the clouds alone move them.
+        let ro = RefineOptions {
+            free_axes: joint_indices(&alt, changes.iter().map(|ch| ch.child)),
+            ..ro.clone()
+        };
+        let rep = refine(&mut alt, points, &ro, limit_pad, progress)?;
         let loss = if rep.accepted {
             rep.loss_after
         } else {
@@ -416,21 +423,24 @@ fn spin_free_refined(
 /// each group's axes tied to their mean direction and keeps the groups when the model's
 /// loss is at most `LOSS_SLACK` times the untied model's and every tied joint's
 /// subtree fits the clouds within `KEEP_SLACK` of before; the groups that fail the
-/// subtree test are left out and the rest tried once more. Returns the kept groups,
-/// each as its joints' child parts.
+/// subtree test are left out and the rest tried once more. Then the joints that may
+/// follow a kept group (`parallel::followers`) are tried on its direction the same
+/// way, each failing follower left out. The axes of the child parts `free` (the
+/// spin-free hinges) stay free of the axis prior. Returns the kept groups (followers
+/// included), each as its joints' child parts.
 fn parallel_refined(
     result: &mut FitResult,
     points: &[Vec<Vec3>],
     grids: &[Grid],
+    free: &[usize],
     ro: &RefineOptions,
     limit_pad: f64,
     progress: &mut dyn FnMut(&Progress) -> Control,
 ) -> crate::Result<Vec<Vec<usize>>> {
-    const LOSS_SLACK: f64 = 1.01;
-    let Some(joints) = result.joints.as_ref() else {
+    let Some(joints) = result.joints.clone() else {
         return Ok(Vec::new());
     };
-    let mut groups = parallel_groups(joints, MAX_ANGLE_DEG);
+    let groups = parallel_groups(&joints, MAX_ANGLE_DEG);
     if groups.is_empty() {
         return Ok(Vec::new());
     }
@@ -442,58 +452,136 @@ fn parallel_refined(
     let base_loss = refine(&mut result.clone(), points, &measure, limit_pad, progress)?.loss_before;
     let c = result.canonical_frame;
     let by_part = points_by_part(&points[c], &result.labels[c], result.parts);
-    // Each tied joint's subtree fit before the tie (`subtree_fit`), by child part.
-    let before: Vec<(usize, f64)> = groups
+    // Every joint's subtree fit before any tie (`subtree_fit`), by joint index.
+    let before: Vec<f64> = joints
         .iter()
-        .flatten()
-        .map(|&j| {
-            let p = joints[j].child;
-            (p, subtree_fit(result, grids, &by_part, p))
-        })
+        .map(|j| subtree_fit(result, grids, &by_part, j.child))
         .collect();
-    let fit_before = |p: usize| before.iter().find(|e| e.0 == p).map_or(0.0, |e| e.1);
-    for _ in 0..2 {
-        let mut alt = result.clone();
-        if let Some(js) = alt.joints.as_mut() {
-            tie_axes(js, &groups);
+    let ro = &RefineOptions {
+        free_axes: joint_indices(result, free.iter().copied()),
+        ..ro.clone()
+    };
+    let tie = TieCheck {
+        points,
+        grids,
+        by_part: &by_part,
+        ro,
+        limit_pad,
+        base_loss,
+        before: &before,
+    };
+    let Some(groups) = tie.attempt(result, groups, Vec::new(), progress)? else {
+        return Ok(Vec::new());
+    };
+    let tied = result.joints.clone().unwrap_or_default();
+    let follow = followers(&tied, &groups, FOLLOW_ANGLE_DEG);
+    let groups = if follow.is_empty() {
+        groups
+    } else {
+        let mut with = groups.clone();
+        for &(j, g) in &follow {
+            with[g].push(j);
         }
-        let tied = RefineOptions {
-            ties: groups.clone(),
-            ..ro.clone()
-        };
-        let rep = refine(&mut alt, points, &tied, limit_pad, progress)?;
-        let loss = if rep.accepted {
-            rep.loss_after
-        } else {
-            rep.loss_before
-        };
-        let children: Vec<Vec<usize>> = groups
-            .iter()
-            .map(|g| g.iter().map(|&j| joints[j].child).collect())
-            .collect();
-        let fails = |g: &Vec<usize>| {
-            g.iter()
-                .any(|&p| subtree_fit(&alt, grids, &by_part, p) > KEEP_SLACK * fit_before(p))
-        };
-        let failed: Vec<bool> = children.iter().map(fails).collect();
-        if !failed.contains(&true) {
-            if loss <= LOSS_SLACK * base_loss {
-                *result = alt;
-                return Ok(children);
+        let fs = follow.iter().map(|f| f.0).collect();
+        tie.attempt(result, with, fs, progress)?.unwrap_or(groups)
+    };
+    Ok(groups
+        .iter()
+        .map(|g| {
+            let mut ch: Vec<usize> = g.iter().map(|&j| joints[j].child).collect();
+            ch.sort_unstable();
+            ch
+        })
+        .collect())
+}
+
+/// The indices of the joints whose child parts `children` lists.
+fn joint_indices(result: &FitResult, children: impl Iterator<Item = usize>) -> Vec<usize> {
+    let Some(js) = result.joints.as_ref() else {
+        return Vec::new();
+    };
+    children
+        .filter_map(|p| js.iter().position(|j| j.child == p))
+        .collect()
+}
+
+/// One tied refinement and its acceptance test, for `parallel_refined`.
+struct TieCheck<'a> {
+    points: &'a [Vec<Vec3>],
+    grids: &'a [Grid],
+    by_part: &'a [Vec<DVec3>],
+    ro: &'a RefineOptions,
+    limit_pad: f64,
+    base_loss: f64,
+    before: &'a [f64],
+}
+
+impl TieCheck<'_> {
+    /// Refines `result` with `groups` tied (`followers` among their members) and
+    /// replaces it when the model's loss stays within `LOSS_SLACK` of the untied
+    /// model's and every tied joint's subtree fit within `KEEP_SLACK` of its own
+    /// before any tie. Members failing the subtree test are left out (a failing
+    /// follower alone, a group with any other failing member) and the rest tried
+    /// once more. Returns the groups kept.
+    fn attempt(
+        &self,
+        result: &mut FitResult,
+        mut groups: Vec<Vec<usize>>,
+        mut followers: Vec<usize>,
+        progress: &mut dyn FnMut(&Progress) -> Control,
+    ) -> crate::Result<Option<Vec<Vec<usize>>>> {
+        const LOSS_SLACK: f64 = 1.01;
+        for _ in 0..2 {
+            let mut alt = result.clone();
+            if let Some(js) = alt.joints.as_mut() {
+                tie_axes(js, &groups, &followers);
             }
-            return Ok(Vec::new());
+            let tied = RefineOptions {
+                ties: groups.clone(),
+                tie_followers: followers.clone(),
+                ..self.ro.clone()
+            };
+            let rep = refine(&mut alt, self.points, &tied, self.limit_pad, progress)?;
+            let loss = if rep.accepted {
+                rep.loss_after
+            } else {
+                rep.loss_before
+            };
+            let Some(js) = alt.joints.as_ref() else {
+                return Ok(None);
+            };
+            let fails = |j: usize| {
+                subtree_fit(&alt, self.grids, self.by_part, js[j].child)
+                    > KEEP_SLACK * self.before.get(j).copied().unwrap_or(0.0)
+            };
+            let failed: Vec<usize> = groups
+                .iter()
+                .flatten()
+                .copied()
+                .filter(|&j| fails(j))
+                .collect();
+            if failed.is_empty() {
+                if loss <= LOSS_SLACK * self.base_loss {
+                    *result = alt;
+                    return Ok(Some(groups));
+                }
+                return Ok(None);
+            }
+            let lost_leader = |g: &Vec<usize>| {
+                g.iter()
+                    .any(|j| failed.contains(j) && !followers.contains(j))
+            };
+            groups.retain(|g| !lost_leader(g));
+            for g in groups.iter_mut() {
+                g.retain(|j| !failed.contains(j));
+            }
+            followers.retain(|j| !failed.contains(j));
+            if groups.is_empty() {
+                return Ok(None);
+            }
         }
-        groups = groups
-            .into_iter()
-            .zip(failed)
-            .filter(|(_, f)| !f)
-            .map(|(g, _)| g)
-            .collect();
-        if groups.is_empty() {
-            return Ok(Vec::new());
-        }
+        Ok(None)
     }
-    Ok(Vec::new())
 }
 
 /// Steps 2 and 3 from Step 1's output: working points `points[k]`, their part labels
@@ -665,11 +753,20 @@ pub fn build_articulated(
         }
         _ => Vec::new(),
     };
+    // The spin-free hinges stay free of the axis prior in the tied refinements too.
+    let free: Vec<usize> = spin_free.iter().map(|s| s.child).collect();
     let parallel = match refine_options(opts, &merged.poses, root) {
         Some(ro) if opts.parallel => {
             let t = clock();
-            let kept =
-                parallel_refined(&mut result, points, &grids, &ro, opts.limit_pad, progress)?;
+            let kept = parallel_refined(
+                &mut result,
+                points,
+                &grids,
+                &free,
+                &ro,
+                opts.limit_pad,
+                progress,
+            )?;
             refine_s += clock() - t;
             kept
         }

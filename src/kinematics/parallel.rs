@@ -24,6 +24,10 @@ use crate::io::result::ResultJoint;
 /// Axes within this angle (degrees) of a related joint's are tried as parallel.
 pub const MAX_ANGLE_DEG: f64 = 10.0;
 
+/// A joint outside every group whose axis lies within this angle (degrees) of a
+/// related kept group's tied direction is tried on that direction (`followers`).
+pub const FOLLOW_ANGLE_DEG: f64 = 30.0;
+
 /// Groups (two or more joints, indices into `joints`) of related joints of one type
 /// whose axes lie within `max_deg` of each other, joined transitively; each group
 /// sorted, groups in order of their first member.
@@ -34,8 +38,7 @@ pub fn parallel_groups(joints: &[ResultJoint], max_deg: f64) -> Vec<Vec<usize>> 
     for a in 0..n {
         for b in a + 1..n {
             let (ja, jb) = (&joints[a], &joints[b]);
-            let related = ja.parent == jb.parent || ja.child == jb.parent || jb.child == ja.parent;
-            if !related || ja.joint_type != jb.joint_type {
+            if !related(ja, jb) || ja.joint_type != jb.joint_type {
                 continue;
             }
             let (u, v) = (unit(ja.axis), unit(jb.axis));
@@ -55,6 +58,77 @@ pub fn parallel_groups(joints: &[ResultJoint], max_deg: f64) -> Vec<Vec<usize>> 
     }
     groups.retain(|g| g.len() >= 2);
     groups
+}
+
+fn related(a: &ResultJoint, b: &ResultJoint) -> bool {
+    a.parent == b.parent || a.child == b.parent || b.child == a.parent
+}
+
+/// Joints outside every one of `groups` that may follow one: of the group's type,
+/// related to one of its members, with an axis within `max_deg` of the group's tied
+/// direction (the nearest such group). Two or more joints agreeing within
+/// `MAX_ANGLE_DEG` outvote an outlier whose own swing left its axis 10–25° off
+/// (procedural quadruped: a shank beside its tied thigh and the other legs); the
+/// follower takes the group's direction without weighing in it, so a real outlier
+/// cannot pull the group (bench-dev talos, session 44). Joined transitively (a joint
+/// related to a follower may follow too). Returns (joint, group index) pairs in joint
+/// order.
+pub fn followers(
+    joints: &[ResultJoint],
+    groups: &[Vec<usize>],
+    max_deg: f64,
+) -> Vec<(usize, usize)> {
+    let min_cos = max_deg.to_radians().lcos();
+    let dirs: Vec<Option<DVec3>> = groups
+        .iter()
+        .map(|g| {
+            let axes = g
+                .iter()
+                .map(|&j| (unit(joints[j].axis), joints[j].state.as_slice()));
+            tied_direction(axes).map(|(d, _)| d)
+        })
+        .collect();
+    // Joined transitively: a shank may follow once its thigh does.
+    let mut member: Vec<Option<usize>> = vec![None; joints.len()];
+    for (gi, g) in groups.iter().enumerate() {
+        for &j in g {
+            if let Some(m) = member.get_mut(j) {
+                *m = Some(gi);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    loop {
+        let mut joined = false;
+        for (j, joint) in joints.iter().enumerate() {
+            if member[j].is_some() {
+                continue;
+            }
+            let a = unit(joint.axis);
+            let best = dirs
+                .iter()
+                .enumerate()
+                .filter_map(|(gi, d)| {
+                    let d = (*d)?;
+                    let ok = joints.iter().zip(&member).any(|(k, m)| {
+                        *m == Some(gi) && k.joint_type == joint.joint_type && related(k, joint)
+                    });
+                    let c = a.dot(d).abs();
+                    (ok && c >= min_cos).then_some((gi, c))
+                })
+                .max_by(|x, y| x.1.total_cmp(&y.1));
+            if let Some((gi, _)) = best {
+                member[j] = Some(gi);
+                out.push((j, gi));
+                joined = true;
+            }
+        }
+        if !joined {
+            break;
+        }
+    }
+    out.sort_unstable();
+    out
 }
 
 fn unit(a: [f64; 3]) -> DVec3 {
@@ -99,15 +173,17 @@ pub fn tied_direction<'a>(
     Some((sum.normalize_or(reference), senses))
 }
 
-/// Sets the axes of each group to its `tied_direction`, as the refinement's ties do;
-/// pivots and states are left to the refinement.
-pub fn tie_axes(joints: &mut [ResultJoint], groups: &[Vec<usize>]) {
+/// Sets the axes of each group to its `tied_direction`, as the refinement's ties do
+/// (`followers` weigh nothing in it); pivots and states are left to the refinement.
+pub fn tie_axes(joints: &mut [ResultJoint], groups: &[Vec<usize>], followers: &[usize]) {
     for g in groups {
         let axes = g.iter().map(|&j| {
-            (
-                DVec3::from_array(joints[j].axis),
-                joints[j].state.as_slice(),
-            )
+            let states: &[f64] = if followers.contains(&j) {
+                &[]
+            } else {
+                joints[j].state.as_slice()
+            };
+            (DVec3::from_array(joints[j].axis), states)
         });
         let Some((dir, senses)) = tied_direction(axes) else {
             continue;
@@ -159,13 +235,44 @@ mod tests {
     }
 
     #[test]
+    fn a_related_outlier_follows_a_group_and_its_child_joint_after_it() {
+        use JointType::{Prismatic as P, Revolute as R};
+        // Body 0: legs 1 and 3 tied on y; leg 5 hinged 20° off with its knee 6 25° off
+        // (related to the group only through leg 5); a tail 7 at 40°; a slide 8 on y;
+        // a joint 10 → 11 on y related to none.
+        let joints = vec![
+            joint(1, 0, R, tilted(2.0)),
+            joint(3, 0, R, tilted(-2.0)),
+            joint(5, 0, R, tilted(20.0)),
+            joint(6, 5, R, tilted(-25.0)),
+            joint(7, 0, R, tilted(40.0)),
+            joint(8, 0, P, tilted(0.0)),
+            joint(11, 10, R, tilted(0.0)),
+        ];
+        let groups = parallel_groups(&joints, MAX_ANGLE_DEG);
+        assert_eq!(groups, vec![vec![0, 1]]);
+        assert_eq!(
+            followers(&joints, &groups, FOLLOW_ANGLE_DEG),
+            vec![(2, 0), (3, 0)]
+        );
+        // Tied, the followers take the group's direction and leave it where it was.
+        let mut tied = joints.clone();
+        tie_axes(&mut tied, &[vec![0, 1, 2, 3]], &[2, 3]);
+        for j in &tied[..4] {
+            assert!(j.axis[0].abs() < 1e-9 && (j.axis[1].abs() - 1.0).abs() < 1e-9);
+        }
+        // A closer cut-off leaves both out (the knee had only the leg to join through).
+        assert!(followers(&joints, &groups, 15.0).is_empty());
+    }
+
+    #[test]
     fn a_wider_swing_weighs_more() {
         let mut joints = vec![
             joint(1, 0, JointType::Revolute, tilted(4.0)),
             joint(2, 0, JointType::Revolute, tilted(-4.0)),
         ];
         joints[1].state = vec![0.0, 0.9];
-        tie_axes(&mut joints, &[vec![0, 1]]);
+        tie_axes(&mut joints, &[vec![0, 1]], &[]);
         // Weights 0.09 and 0.81: the mean leans towards the second axis.
         let got = joints[0].axis[0].latan2(joints[0].axis[1]).to_degrees();
         assert!(got < -2.0 && got > -4.0, "{got}°");
@@ -181,7 +288,7 @@ mod tests {
                 [-a[0], -a[1], -a[2]]
             }),
         ];
-        tie_axes(&mut joints, &[vec![0, 1]]);
+        tie_axes(&mut joints, &[vec![0, 1]], &[]);
         let want = tilted(1.0);
         for (i, w) in want.iter().enumerate() {
             assert!((joints[0].axis[i] - w).abs() < 1e-12);

@@ -90,6 +90,11 @@ pub struct RefineOptions {
     /// after every step each group's axes are set to their sign-aligned mean
     /// (`kinematics::parallel`). Empty: every axis free.
     pub ties: Vec<Vec<usize>>,
+    /// Members of `ties` whose axes follow their group's direction without weighing
+    /// in it (`parallel::followers`).
+    pub tie_followers: Vec<usize>,
+    /// Joints (indices) whose axes the axis prior leaves free.
+    pub free_axes: Vec<usize>,
 }
 
 impl Default for RefineOptions {
@@ -106,6 +111,8 @@ impl Default for RefineOptions {
             emd_sample: 192,
             emd_every: 20,
             ties: Vec::new(),
+            tie_followers: Vec::new(),
+            free_axes: Vec::new(),
         }
     }
 }
@@ -436,15 +443,20 @@ pub(crate) fn loss_grad(
 }
 
 /// Makes the axes of each group in `ties` parallel: each is set to the group's
-/// `parallel::tied_direction` (from its states' ranges), keeping its own sense and
-/// length. Out-of-range indices are ignored.
-pub(crate) fn tie_axes(m: &Model, x: &mut [f64], ties: &[Vec<usize>]) {
+/// `parallel::tied_direction` (from its states' ranges; `followers` weigh nothing),
+/// keeping its own sense and length. Out-of-range indices are ignored.
+pub(crate) fn tie_axes(m: &Model, x: &mut [f64], ties: &[Vec<usize>], followers: &[usize]) {
     let n = m.types.len();
     for group in ties {
         let members: Vec<usize> = group.iter().copied().filter(|&j| j < n).collect();
         let axes = members.iter().map(|&j| {
             let b = m.joint_base(j);
-            (Model::v3(x, b), &x[b + 6..b + 6 + m.k])
+            let states: &[f64] = if followers.contains(&j) {
+                &[]
+            } else {
+                &x[b + 6..b + 6 + m.k]
+            };
+            (Model::v3(x, b), states)
         });
         let Some((dir, senses)) = super::parallel::tied_direction(axes) else {
             continue;
@@ -462,13 +474,20 @@ pub(crate) fn tie_axes(m: &Model, x: &mut [f64], ties: &[Vec<usize>]) {
 /// displacement of its whole part (bench-dev panda_gripper: the refinement corrects the
 /// projected finger axes from 29° to 3.5° median, which the prior would block), whereas a
 /// hinge about a part's own symmetry axis is invisible to the Chamfer.
-pub(crate) fn axis_prior(m: &Model, x: &[f64], x0: &[f64], w: f64, grad: &mut [f64]) -> f64 {
+pub(crate) fn axis_prior(
+    m: &Model,
+    x: &[f64],
+    x0: &[f64],
+    w: f64,
+    free: &[usize],
+    grad: &mut [f64],
+) -> f64 {
     if w <= 0.0 {
         return 0.0;
     }
     let mut total = 0.0;
     for j in 0..m.types.len() {
-        if m.types[j] != JointType::Revolute {
+        if m.types[j] != JointType::Revolute || free.contains(&j) {
             continue;
         }
         let b = m.joint_base(j);
@@ -606,7 +625,7 @@ pub fn refine(
     let mut matching = None;
 
     let mut x = x0.clone();
-    tie_axes(&m, &mut x, &opts.ties);
+    tie_axes(&m, &mut x, &opts.ties, &opts.tie_followers);
     let (mut mo, mut ve) = (vec![0.0; x.len()], vec![0.0; x.len()]);
     let mut g = vec![0.0; x.len()];
     let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-8);
@@ -630,7 +649,7 @@ pub fn refine(
             matching.as_ref(),
             Some(&mut g),
             Some(&mut hints),
-        ) + axis_prior(&m, &x, &x0, prior_w, &mut g);
+        ) + axis_prior(&m, &x, &x0, prior_w, &opts.free_axes, &mut g);
         let lr = opts.lr
             * (0.1
                 + 0.9
@@ -642,7 +661,7 @@ pub fn refine(
             ve[i] = b2 * ve[i] + (1.0 - b2) * g[i] * g[i];
             x[i] -= lr * (mo[i] / c1) / ((ve[i] / c2).sqrt() + eps);
         }
-        tie_axes(&m, &mut x, &opts.ties);
+        tie_axes(&m, &mut x, &opts.ties, &opts.tie_followers);
         if it % 25 == 0 || it + 1 == opts.iters {
             let p = Progress {
                 stage: Stage::Joints,
@@ -790,9 +809,9 @@ mod tests {
         }
         let w = 0.7;
         let mut g = vec![0.0; m.len()];
-        let p = axis_prior(&m, &x, &x0, w, &mut g);
+        let p = axis_prior(&m, &x, &x0, w, &[], &mut g);
         assert!(p > 0.0);
-        assert!(axis_prior(&m, &x0, &x0, w, &mut vec![0.0; m.len()]) < 1e-12);
+        assert!(axis_prior(&m, &x0, &x0, w, &[], &mut vec![0.0; m.len()]) < 1e-12);
         let h = 1e-6;
         for i in 0..m.len() {
             let mut xp = x.clone();
@@ -800,12 +819,16 @@ mod tests {
             let mut xm = x.clone();
             xm[i] -= h;
             let mut scratch = vec![0.0; m.len()];
-            let fd = (axis_prior(&m, &xp, &x0, w, &mut scratch)
-                - axis_prior(&m, &xm, &x0, w, &mut scratch))
+            let fd = (axis_prior(&m, &xp, &x0, w, &[], &mut scratch)
+                - axis_prior(&m, &xm, &x0, w, &[], &mut scratch))
                 / (2.0 * h);
             let err = (fd - g[i]).abs() / (1e-6 + fd.abs().max(g[i].abs()));
             assert!(err < 1e-5, "param {i}: fd {fd} analytic {}", g[i]);
         }
+        // The toy's one hinge left free (`RefineOptions::free_axes`): no cost, no pull.
+        let mut gf = vec![0.0; m.len()];
+        assert_eq!(axis_prior(&m, &x, &x0, w, &[0], &mut gf), 0.0);
+        assert!(gf.iter().all(|&v| v == 0.0));
     }
 
     #[test]
