@@ -14,7 +14,9 @@ use super::observed::{
     keep_faithful_poses, object_size, observed_motion, points_by_part, polish_motions,
     polish_poses, AGREE_SPACINGS, POLISH_GAIN, POLISH_KEEP, POLISH_ROUNDS,
 };
-use super::parallel::{followers, parallel_groups, tie_axes, FOLLOW_ANGLE_DEG, MAX_ANGLE_DEG};
+use super::parallel::{
+    followers, joined_groups, parallel_groups, tie_axes, FOLLOW_ANGLE_DEG, MAX_ANGLE_DEG,
+};
 use super::project::{motions_from_canonical, project_joints, JointResidual};
 use super::refine::{refine, RefineOptions, RefineReport};
 use super::screw::{state_range, PartExtent};
@@ -475,6 +477,7 @@ fn parallel_refined(
     };
     let tied = result.joints.clone().unwrap_or_default();
     let follow = followers(&tied, &groups, FOLLOW_ANGLE_DEG);
+    let mut fs_kept: Vec<usize> = Vec::new();
     let groups = if follow.is_empty() {
         groups
     } else {
@@ -483,7 +486,25 @@ fn parallel_refined(
             with[g].push(j);
         }
         let fs = follow.iter().map(|f| f.0).collect();
-        tie.attempt(result, with, fs, progress)?.unwrap_or(groups)
+        match tie.attempt(result, with, fs, progress)? {
+            Some(g) => {
+                fs_kept = follow
+                    .iter()
+                    .map(|f| f.0)
+                    .filter(|j| g.iter().flatten().any(|k| k == j))
+                    .collect();
+                g
+            }
+            None => groups,
+        }
+    };
+    // Then related groups whose directions agree within the followers' angle, as one.
+    let tied = result.joints.clone().unwrap_or_default();
+    let groups = match joined_groups(&tied, &groups, &fs_kept, FOLLOW_ANGLE_DEG) {
+        Some(joined) => tie
+            .attempt(result, joined, fs_kept, progress)?
+            .unwrap_or(groups),
+        None => groups,
     };
     Ok(groups
         .iter()

@@ -135,6 +135,66 @@ fn unit(a: [f64; 3]) -> DVec3 {
     DVec3::from_array(a).normalize_or_zero()
 }
 
+/// Unions of `groups` whose tied directions lie within `max_deg` of each other and
+/// that are related (a member of one related to a member of the other, one type):
+/// each group's own joints agreed within `MAX_ANGLE_DEG`, while two groups fitted
+/// apart (a quadruped's front legs 3.5° and its hind legs 7.4° off, 10.9° apart) may
+/// still be one. `None` when no two groups join.
+pub fn joined_groups(
+    joints: &[ResultJoint],
+    groups: &[Vec<usize>],
+    followers: &[usize],
+    max_deg: f64,
+) -> Option<Vec<Vec<usize>>> {
+    let min_cos = max_deg.to_radians().lcos();
+    let dirs: Vec<Option<DVec3>> = groups
+        .iter()
+        .map(|g| {
+            let axes = g.iter().map(|&j| {
+                let states: &[f64] = if followers.contains(&j) {
+                    &[]
+                } else {
+                    joints[j].state.as_slice()
+                };
+                (unit(joints[j].axis), states)
+            });
+            tied_direction(axes).map(|(d, _)| d)
+        })
+        .collect();
+    let mut sets = UnionFind::<usize>::new(groups.len());
+    let mut any = false;
+    for a in 0..groups.len() {
+        for b in a + 1..groups.len() {
+            let (Some(da), Some(db)) = (dirs[a], dirs[b]) else {
+                continue;
+            };
+            let linked = groups[a].iter().any(|&x| {
+                groups[b].iter().any(|&y| {
+                    joints[x].joint_type == joints[y].joint_type && related(&joints[x], &joints[y])
+                })
+            });
+            if linked && da.dot(db).abs() >= min_cos && sets.union(a, b) {
+                any = true;
+            }
+        }
+    }
+    if !any {
+        return None;
+    }
+    let labels = sets.into_labeling();
+    let mut out: Vec<Vec<usize>> = Vec::new();
+    let mut first: Vec<(usize, usize)> = Vec::new();
+    for (gi, g) in groups.iter().enumerate() {
+        if let Some(&(_, oi)) = first.iter().find(|(l, _)| *l == labels[gi]) {
+            out[oi].extend_from_slice(g);
+        } else {
+            first.push((labels[gi], out.len()));
+            out.push(g.clone());
+        }
+    }
+    Some(out)
+}
+
 /// A joint's weight in its group's mean direction: the square of its state range. A
 /// hinge seen over a wider swing has a better determined axis (procedural quadruped,
 /// fast, generator seeds 0–3, the found axes set to their group's mean without a
@@ -263,6 +323,27 @@ mod tests {
         }
         // A closer cut-off leaves both out (the knee had only the leg to join through).
         assert!(followers(&joints, &groups, 15.0).is_empty());
+    }
+
+    #[test]
+    fn related_groups_fitted_apart_join() {
+        use JointType::Revolute as R;
+        // Body 0: front legs 1, 2 at +4°, hind legs 3, 4 at −8° (12° apart); a chain
+        // 10 → 11 → 12 on y related to neither.
+        let joints = vec![
+            joint(1, 0, R, tilted(4.0)),
+            joint(2, 0, R, tilted(4.5)),
+            joint(3, 0, R, tilted(-8.0)),
+            joint(4, 0, R, tilted(-7.5)),
+            joint(11, 10, R, tilted(0.0)),
+            joint(12, 11, R, tilted(0.5)),
+        ];
+        let groups = vec![vec![0, 1], vec![2, 3], vec![4, 5]];
+        assert_eq!(
+            joined_groups(&joints, &groups, &[], FOLLOW_ANGLE_DEG),
+            Some(vec![vec![0, 1, 2, 3], vec![4, 5]])
+        );
+        assert_eq!(joined_groups(&joints, &groups, &[], MAX_ANGLE_DEG), None);
     }
 
     #[test]
