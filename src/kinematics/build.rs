@@ -427,7 +427,8 @@ fn spin_free_refined(
 /// subtree fits the clouds within `KEEP_SLACK` of before; the groups that fail the
 /// subtree test are left out and the rest tried once more. Then the joints that may
 /// follow a kept group (`parallel::followers`) are tried on its direction the same
-/// way, each failing follower left out. The axes of the child parts `free` (the
+/// way, each failing follower left out, and then related groups fitted apart as one
+/// (`parallel::joined_groups`). The axes of the child parts `free` (the
 /// spin-free hinges) stay free of the axis prior. Returns the kept groups (followers
 /// included), each as its joints' child parts.
 fn parallel_refined(
@@ -472,41 +473,31 @@ fn parallel_refined(
         base_loss,
         before: &before,
     };
-    let Some(groups) = tie.attempt(result, groups, Vec::new(), progress)? else {
+    let Some(mut kept) = tie.attempt(result, groups, Vec::new(), progress)? else {
         return Ok(Vec::new());
     };
+    // Then the joints that may follow a kept group, and related groups whose directions
+    // agree within the same angle as one.
     let tied = result.joints.clone().unwrap_or_default();
-    let follow = followers(&tied, &groups, FOLLOW_ANGLE_DEG);
-    let mut fs_kept: Vec<usize> = Vec::new();
-    let groups = if follow.is_empty() {
-        groups
-    } else {
-        let mut with = groups.clone();
+    let follow = followers(&tied, &kept.groups, FOLLOW_ANGLE_DEG);
+    if !follow.is_empty() {
+        let mut with = kept.groups.clone();
         for &(j, g) in &follow {
             with[g].push(j);
         }
         let fs = follow.iter().map(|f| f.0).collect();
-        match tie.attempt(result, with, fs, progress)? {
-            Some(g) => {
-                fs_kept = follow
-                    .iter()
-                    .map(|f| f.0)
-                    .filter(|j| g.iter().flatten().any(|k| k == j))
-                    .collect();
-                g
-            }
-            None => groups,
+        if let Some(k) = tie.attempt(result, with, fs, progress)? {
+            kept = k;
         }
-    };
-    // Then related groups whose directions agree within the followers' angle, as one.
+    }
     let tied = result.joints.clone().unwrap_or_default();
-    let groups = match joined_groups(&tied, &groups, &fs_kept, FOLLOW_ANGLE_DEG) {
-        Some(joined) => tie
-            .attempt(result, joined, fs_kept, progress)?
-            .unwrap_or(groups),
-        None => groups,
-    };
-    Ok(groups
+    if let Some(joined) = joined_groups(&tied, &kept.groups, &kept.followers, FOLLOW_ANGLE_DEG) {
+        if let Some(k) = tie.attempt(result, joined, kept.followers.clone(), progress)? {
+            kept = k;
+        }
+    }
+    Ok(kept
+        .groups
         .iter()
         .map(|g| {
             let mut ch: Vec<usize> = g.iter().map(|&j| joints[j].child).collect();
@@ -526,6 +517,12 @@ fn joint_indices(result: &FitResult, children: impl Iterator<Item = usize>) -> V
         .collect()
 }
 
+/// Groups kept tied (joint indices) and which of their members are followers.
+struct Tied {
+    groups: Vec<Vec<usize>>,
+    followers: Vec<usize>,
+}
+
 /// One tied refinement and its acceptance test, for `parallel_refined`.
 struct TieCheck<'a> {
     points: &'a [Vec<Vec3>],
@@ -543,14 +540,14 @@ impl TieCheck<'_> {
     /// model's and every tied joint's subtree fit within `KEEP_SLACK` of its own
     /// before any tie. Members failing the subtree test are left out (a failing
     /// follower alone, a group with any other failing member) and the rest tried
-    /// once more. Returns the groups kept.
+    /// once more. Returns the groups kept and their followers.
     fn attempt(
         &self,
         result: &mut FitResult,
         mut groups: Vec<Vec<usize>>,
         mut followers: Vec<usize>,
         progress: &mut dyn FnMut(&Progress) -> Control,
-    ) -> crate::Result<Option<Vec<Vec<usize>>>> {
+    ) -> crate::Result<Option<Tied>> {
         const LOSS_SLACK: f64 = 1.01;
         for _ in 0..2 {
             let mut alt = result.clone();
@@ -584,7 +581,7 @@ impl TieCheck<'_> {
             if failed.is_empty() {
                 if loss <= LOSS_SLACK * self.base_loss {
                     *result = alt;
-                    return Ok(Some(groups));
+                    return Ok(Some(Tied { groups, followers }));
                 }
                 return Ok(None);
             }

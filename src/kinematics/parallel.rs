@@ -25,7 +25,8 @@ use crate::io::result::ResultJoint;
 pub const MAX_ANGLE_DEG: f64 = 10.0;
 
 /// A joint outside every group whose axis lies within this angle (degrees) of a
-/// related kept group's tied direction is tried on that direction (`followers`).
+/// related kept group's tied direction is tried on that direction (`followers`), and
+/// related groups whose directions lie within it are tried as one (`joined_groups`).
 pub const FOLLOW_ANGLE_DEG: f64 = 30.0;
 
 /// Groups (two or more joints, indices into `joints`) of related joints of one type
@@ -79,15 +80,7 @@ pub fn followers(
     max_deg: f64,
 ) -> Vec<(usize, usize)> {
     let min_cos = max_deg.to_radians().lcos();
-    let dirs: Vec<Option<DVec3>> = groups
-        .iter()
-        .map(|g| {
-            let axes = g
-                .iter()
-                .map(|&j| (unit(joints[j].axis), joints[j].state.as_slice()));
-            tied_direction(axes).map(|(d, _)| d)
-        })
-        .collect();
+    let dirs = group_directions(joints, groups, &[]);
     // Joined transitively: a shank may follow once its thigh does.
     let mut member: Vec<Option<usize>> = vec![None; joints.len()];
     for (gi, g) in groups.iter().enumerate() {
@@ -135,6 +128,32 @@ fn unit(a: [f64; 3]) -> DVec3 {
     DVec3::from_array(a).normalize_or_zero()
 }
 
+/// Joint `j`'s axis and the states its weight comes from: none for a follower, which
+/// weighs nothing in its group's direction.
+fn weighed<'a>(joints: &'a [ResultJoint], j: usize, followers: &[usize]) -> (DVec3, &'a [f64]) {
+    let states: &[f64] = if followers.contains(&j) {
+        &[]
+    } else {
+        &joints[j].state
+    };
+    (DVec3::from_array(joints[j].axis), states)
+}
+
+/// The tied direction of each group (`tied_direction`, `followers` weighing nothing).
+fn group_directions(
+    joints: &[ResultJoint],
+    groups: &[Vec<usize>],
+    followers: &[usize],
+) -> Vec<Option<DVec3>> {
+    groups
+        .iter()
+        .map(|g| {
+            let axes = g.iter().map(|&j| weighed(joints, j, followers));
+            tied_direction(axes).map(|(d, _)| d)
+        })
+        .collect()
+}
+
 /// Unions of `groups` whose tied directions lie within `max_deg` of each other and
 /// that are related (a member of one related to a member of the other, one type):
 /// each group's own joints agreed within `MAX_ANGLE_DEG`, while two groups fitted
@@ -147,20 +166,7 @@ pub fn joined_groups(
     max_deg: f64,
 ) -> Option<Vec<Vec<usize>>> {
     let min_cos = max_deg.to_radians().lcos();
-    let dirs: Vec<Option<DVec3>> = groups
-        .iter()
-        .map(|g| {
-            let axes = g.iter().map(|&j| {
-                let states: &[f64] = if followers.contains(&j) {
-                    &[]
-                } else {
-                    joints[j].state.as_slice()
-                };
-                (unit(joints[j].axis), states)
-            });
-            tied_direction(axes).map(|(d, _)| d)
-        })
-        .collect();
+    let dirs = group_directions(joints, groups, followers);
     let mut sets = UnionFind::<usize>::new(groups.len());
     let mut any = false;
     for a in 0..groups.len() {
@@ -237,14 +243,7 @@ pub fn tied_direction<'a>(
 /// (`followers` weigh nothing in it); pivots and states are left to the refinement.
 pub fn tie_axes(joints: &mut [ResultJoint], groups: &[Vec<usize>], followers: &[usize]) {
     for g in groups {
-        let axes = g.iter().map(|&j| {
-            let states: &[f64] = if followers.contains(&j) {
-                &[]
-            } else {
-                joints[j].state.as_slice()
-            };
-            (DVec3::from_array(joints[j].axis), states)
-        });
+        let axes = g.iter().map(|&j| weighed(joints, j, followers));
         let Some((dir, senses)) = tied_direction(axes) else {
             continue;
         };
@@ -321,7 +320,7 @@ mod tests {
         for j in &tied[..4] {
             assert!(j.axis[0].abs() < 1e-9 && (j.axis[1].abs() - 1.0).abs() < 1e-9);
         }
-        // A closer cut-off leaves both out (the knee had only the leg to join through).
+        // At 15° neither follows.
         assert!(followers(&joints, &groups, 15.0).is_empty());
     }
 
