@@ -26,7 +26,7 @@ use super::tree::{least_motion_root, pair_costs, part_motion, spanning_tree};
 use crate::geom::knn::Grid;
 use crate::geom::se3::rigid_inverse;
 use crate::io::gt::JointType;
-use crate::io::result::FitResult;
+use crate::io::result::{FitResult, ResultJoint};
 use crate::pipeline::{Control, Progress, Stage};
 
 /// Options of Steps 2 and 3.
@@ -357,8 +357,8 @@ fn refine_options(opts: &KinOptions, poses: &[Vec<DMat4>], root: usize) -> Optio
 /// Proposes spin-free hinges for symmetric parts (`kinematics::spin_free`), refines
 /// the model again from there (pivots, states and the new axes themselves, which the
 /// axis prior leaves free: `RefineOptions::free_axes`), and keeps the proposals whose
-/// subtree still fits the clouds within `KEEP_SLACK` of the first refinement's, when the model's loss is no
-/// worse than `LOSS_SLACK` times the first refinement's. The proposals that fail are
+/// subtree still fits the clouds within `KEEP_SLACK` of the first refinement's, when
+/// the model's loss is no worse than `LOSS_SLACK` times the first refinement's. The proposals that fail are
 /// left out and the rest tried once more.
 fn spin_free_refined(
     result: &mut FitResult,
@@ -440,10 +440,7 @@ fn parallel_refined(
     limit_pad: f64,
     progress: &mut dyn FnMut(&Progress) -> Control,
 ) -> crate::Result<Vec<Vec<usize>>> {
-    let Some(joints) = result.joints.clone() else {
-        return Ok(Vec::new());
-    };
-    let groups = parallel_groups(&joints, MAX_ANGLE_DEG);
+    let groups = parallel_groups(joints_of(result), MAX_ANGLE_DEG);
     if groups.is_empty() {
         return Ok(Vec::new());
     }
@@ -456,7 +453,7 @@ fn parallel_refined(
     let c = result.canonical_frame;
     let by_part = points_by_part(&points[c], &result.labels[c], result.parts);
     // Every joint's subtree fit before any tie (`subtree_fit`), by joint index.
-    let before: Vec<f64> = joints
+    let before: Vec<f64> = joints_of(result)
         .iter()
         .map(|j| subtree_fit(result, grids, &by_part, j.child))
         .collect();
@@ -478,8 +475,7 @@ fn parallel_refined(
     };
     // Then the joints that may follow a kept group, and related groups whose directions
     // agree within the same angle as one.
-    let tied = result.joints.clone().unwrap_or_default();
-    let follow = followers(&tied, &kept.groups, FOLLOW_ANGLE_DEG);
+    let follow = followers(joints_of(result), &kept.groups, FOLLOW_ANGLE_DEG);
     if !follow.is_empty() {
         let mut with = kept.groups.clone();
         for &(j, g) in &follow {
@@ -490,8 +486,13 @@ fn parallel_refined(
             kept = k;
         }
     }
-    let tied = result.joints.clone().unwrap_or_default();
-    if let Some(joined) = joined_groups(&tied, &kept.groups, &kept.followers, FOLLOW_ANGLE_DEG) {
+    let joined = joined_groups(
+        joints_of(result),
+        &kept.groups,
+        &kept.followers,
+        FOLLOW_ANGLE_DEG,
+    );
+    if let Some(joined) = joined {
         if let Some(k) = tie.attempt(result, joined, kept.followers.clone(), progress)? {
             kept = k;
         }
@@ -500,18 +501,21 @@ fn parallel_refined(
         .groups
         .iter()
         .map(|g| {
-            let mut ch: Vec<usize> = g.iter().map(|&j| joints[j].child).collect();
+            let mut ch: Vec<usize> = g.iter().map(|&j| joints_of(result)[j].child).collect();
             ch.sort_unstable();
             ch
         })
         .collect())
 }
 
+/// The result's joints (none before Step 3).
+fn joints_of(result: &FitResult) -> &[ResultJoint] {
+    result.joints.as_deref().unwrap_or_default()
+}
+
 /// The indices of the joints whose child parts `children` lists.
 fn joint_indices(result: &FitResult, children: impl Iterator<Item = usize>) -> Vec<usize> {
-    let Some(js) = result.joints.as_ref() else {
-        return Vec::new();
-    };
+    let js = joints_of(result);
     children
         .filter_map(|p| js.iter().position(|j| j.child == p))
         .collect()
@@ -565,9 +569,7 @@ impl TieCheck<'_> {
             } else {
                 rep.loss_before
             };
-            let Some(js) = alt.joints.as_ref() else {
-                return Ok(None);
-            };
+            let js = joints_of(&alt);
             let fails = |j: usize| {
                 subtree_fit(&alt, self.grids, self.by_part, js[j].child)
                     > KEEP_SLACK * self.before.get(j).copied().unwrap_or(0.0)

@@ -447,9 +447,10 @@ pub(crate) fn loss_grad(
 /// keeping its own sense and length. Out-of-range indices are ignored.
 pub(crate) fn tie_axes(m: &Model, x: &mut [f64], ties: &[Vec<usize>], followers: &[usize]) {
     let n = m.types.len();
+    // Runs after every Adam step: no allocation.
     for group in ties {
-        let members: Vec<usize> = group.iter().copied().filter(|&j| j < n).collect();
-        let axes = members.iter().map(|&j| {
+        let members = || group.iter().copied().filter(|&j| j < n);
+        let axes = members().map(|j| {
             let b = m.joint_base(j);
             let states: &[f64] = if followers.contains(&j) {
                 &[]
@@ -461,7 +462,7 @@ pub(crate) fn tie_axes(m: &Model, x: &mut [f64], ties: &[Vec<usize>], followers:
         let Some((dir, senses)) = super::parallel::tied_direction(axes) else {
             continue;
         };
-        for (&j, s) in members.iter().zip(senses) {
+        for (j, s) in members().zip(senses) {
             let b = m.joint_base(j);
             let v = dir * s * Model::v3(x, b).length().max(1e-12);
             x[b..b + 3].copy_from_slice(&v.to_array());
