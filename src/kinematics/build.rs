@@ -358,8 +358,8 @@ fn refine_options(opts: &KinOptions, poses: &[Vec<DMat4>], root: usize) -> Optio
 /// the model again from there (pivots, states and the new axes themselves, which the
 /// axis prior leaves free: `RefineOptions::free_axes`), and keeps the proposals whose
 /// subtree still fits the clouds within `KEEP_SLACK` of the first refinement's, when
-/// the model's loss is no worse than `LOSS_SLACK` times the first refinement's. The proposals that fail are
-/// left out and the rest tried once more.
+/// the model's loss is no worse than `LOSS_SLACK` times the first refinement's. The
+/// proposals that fail are left out and the rest tried once more.
 fn spin_free_refined(
     result: &mut FitResult,
     points: &[Vec<Vec3>],

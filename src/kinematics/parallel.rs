@@ -128,14 +128,19 @@ fn unit(a: [f64; 3]) -> DVec3 {
     DVec3::from_array(a).normalize_or_zero()
 }
 
-/// Joint `j`'s axis and the states its weight comes from: none for a follower, which
-/// weighs nothing in its group's direction.
-fn weighed<'a>(joints: &'a [ResultJoint], j: usize, followers: &[usize]) -> (DVec3, &'a [f64]) {
-    let states: &[f64] = if followers.contains(&j) {
+/// The states joint `j`'s weight in its group's `tied_direction` comes from: none for
+/// a follower, which weighs nothing there.
+pub(crate) fn weighing_states<'a>(j: usize, followers: &[usize], states: &'a [f64]) -> &'a [f64] {
+    if followers.contains(&j) {
         &[]
     } else {
-        &joints[j].state
-    };
+        states
+    }
+}
+
+/// Joint `j`'s axis and the states its weight comes from (`weighing_states`).
+fn weighed<'a>(joints: &'a [ResultJoint], j: usize, followers: &[usize]) -> (DVec3, &'a [f64]) {
+    let states = weighing_states(j, followers, &joints[j].state);
     (DVec3::from_array(joints[j].axis), states)
 }
 

@@ -452,11 +452,7 @@ pub(crate) fn tie_axes(m: &Model, x: &mut [f64], ties: &[Vec<usize>], followers:
         let members = || group.iter().copied().filter(|&j| j < n);
         let axes = members().map(|j| {
             let b = m.joint_base(j);
-            let states: &[f64] = if followers.contains(&j) {
-                &[]
-            } else {
-                &x[b + 6..b + 6 + m.k]
-            };
+            let states = super::parallel::weighing_states(j, followers, &x[b + 6..b + 6 + m.k]);
             (Model::v3(x, b), states)
         });
         let Some((dir, senses)) = super::parallel::tied_direction(axes) else {
