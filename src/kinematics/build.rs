@@ -15,7 +15,8 @@ use super::observed::{
     polish_poses, AGREE_SPACINGS, POLISH_GAIN, POLISH_KEEP, POLISH_ROUNDS,
 };
 use super::parallel::{
-    followers, joined_groups, parallel_groups, tie_axes, FOLLOW_ANGLE_DEG, MAX_ANGLE_DEG,
+    followers, joined_groups, parallel_groups, reproject, tie_axes, FAR_FOLLOW_ANGLE_DEG,
+    FOLLOW_ANGLE_DEG, MAX_ANGLE_DEG,
 };
 use super::project::{motions_from_canonical, project_joints, JointResidual};
 use super::refine::{refine, RefineOptions, RefineReport};
@@ -427,12 +428,18 @@ fn spin_free_refined(
 /// subtree fits the clouds within `KEEP_SLACK` of before; the groups that fail the
 /// subtree test are left out and the rest tried once more. Then the joints that may
 /// follow a kept group (`parallel::followers`) are tried on its direction the same
-/// way, each failing follower left out, and then related groups fitted apart as one
-/// (`parallel::joined_groups`). The axes of the child parts `free` (the
+/// way, each failing follower left out; then the revolute joints still outside, however
+/// far their axes lie from a related kept group's direction
+/// (`parallel::FAR_FOLLOW_ANGLE_DEG`), with their states and pivots found anew along
+/// it (`parallel::reproject`); and then related groups fitted apart as one
+/// (`parallel::joined_groups`). `poses` are the merged parts' Step-1 poses. The axes of
+/// the child parts `free` (the
 /// spin-free hinges) stay free of the axis prior. Returns the kept groups (followers
 /// included), each as its joints' child parts.
+#[allow(clippy::too_many_arguments)]
 fn parallel_refined(
     result: &mut FitResult,
+    poses: &[Vec<DMat4>],
     points: &[Vec<Vec3>],
     grids: &[Grid],
     free: &[usize],
@@ -462,6 +469,7 @@ fn parallel_refined(
         ..ro.clone()
     };
     let tie = TieCheck {
+        poses,
         points,
         grids,
         by_part: &by_part,
@@ -470,7 +478,7 @@ fn parallel_refined(
         base_loss,
         before: &before,
     };
-    let Some(mut kept) = tie.attempt(result, groups, Vec::new(), progress)? else {
+    let Some(mut kept) = tie.attempt(result, groups, Vec::new(), &[], progress)? else {
         return Ok(Vec::new());
     };
     // Then the joints that may follow a kept group, and related groups whose directions
@@ -482,7 +490,28 @@ fn parallel_refined(
             with[g].push(j);
         }
         let fs = follow.iter().map(|f| f.0).collect();
-        if let Some(k) = tie.attempt(result, with, fs, progress)? {
+        if let Some(k) = tie.attempt(result, with, fs, &[], progress)? {
+            kept = k;
+        }
+    }
+    // Then joints still outside every group whose axis lies farther from a kept
+    // group's direction, with their states and pivots found anew along it.
+    let far = followers(joints_of(result), &kept.groups, FAR_FOLLOW_ANGLE_DEG);
+    let far: Vec<(usize, usize)> = far
+        .into_iter()
+        .filter(|&(j, _)| {
+            !kept.followers.contains(&j) && joints_of(result)[j].joint_type == JointType::Revolute
+        })
+        .collect();
+    if !far.is_empty() {
+        let mut with = kept.groups.clone();
+        for &(j, g) in &far {
+            with[g].push(j);
+        }
+        let mut fs = kept.followers.clone();
+        fs.extend(far.iter().map(|f| f.0));
+        let anew: Vec<usize> = far.iter().map(|f| f.0).collect();
+        if let Some(k) = tie.attempt(result, with, fs, &anew, progress)? {
             kept = k;
         }
     }
@@ -493,7 +522,7 @@ fn parallel_refined(
         FOLLOW_ANGLE_DEG,
     );
     if let Some(joined) = joined {
-        if let Some(k) = tie.attempt(result, joined, kept.followers.clone(), progress)? {
+        if let Some(k) = tie.attempt(result, joined, kept.followers.clone(), &[], progress)? {
             kept = k;
         }
     }
@@ -529,6 +558,8 @@ struct Tied {
 
 /// One tied refinement and its acceptance test, for `parallel_refined`.
 struct TieCheck<'a> {
+    /// The merged parts' Step-1 poses (`parallel::reproject`).
+    poses: &'a [Vec<DMat4>],
     points: &'a [Vec<Vec3>],
     grids: &'a [Grid],
     by_part: &'a [Vec<DVec3>],
@@ -544,19 +575,28 @@ impl TieCheck<'_> {
     /// model's and every tied joint's subtree fit within `KEEP_SLACK` of its own
     /// before any tie. Members failing the subtree test are left out (a failing
     /// follower alone, a group with any other failing member) and the rest tried
-    /// once more. Returns the groups kept and their followers.
+    /// once more. The followers `anew` are first re-projected onto their tied axes
+    /// (`parallel::reproject`), and the attempt ends when none of them is left. Returns the
+    /// groups kept and their followers.
     fn attempt(
         &self,
         result: &mut FitResult,
         mut groups: Vec<Vec<usize>>,
         mut followers: Vec<usize>,
+        anew: &[usize],
         progress: &mut dyn FnMut(&Progress) -> Control,
     ) -> crate::Result<Option<Tied>> {
         const LOSS_SLACK: f64 = 1.01;
         for _ in 0..2 {
             let mut alt = result.clone();
+            let canonical = alt.canonical_frame;
             if let Some(js) = alt.joints.as_mut() {
                 tie_axes(js, &groups, &followers);
+                for &j in anew.iter().filter(|j| followers.contains(j)) {
+                    let child = js[j].child;
+                    let pts = self.by_part.get(child).map_or(&[][..], |v| &v[..]);
+                    reproject(&mut js[j], self.poses, pts, canonical, self.limit_pad);
+                }
             }
             let tied = RefineOptions {
                 ties: groups.clone(),
@@ -596,7 +636,10 @@ impl TieCheck<'_> {
                 g.retain(|j| !failed.contains(j));
             }
             followers.retain(|j| !failed.contains(j));
-            if groups.is_empty() {
+            // An attempt made for joints taken from afar is over when none is left: the
+            // rest is the model as it was.
+            let none_anew = !anew.is_empty() && !anew.iter().any(|j| followers.contains(j));
+            if groups.is_empty() || none_anew {
                 return Ok(None);
             }
         }
@@ -780,6 +823,7 @@ pub fn build_articulated(
             let t = clock();
             let kept = parallel_refined(
                 &mut result,
+                &merged.poses,
                 points,
                 &grids,
                 &free,

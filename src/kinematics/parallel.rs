@@ -14,12 +14,13 @@
 //! (`RefineOptions::ties`) and keeps the groups only where the model still fits the
 //! clouds as well as without them.
 
-use glam::DVec3;
+use glam::{DMat3, DMat4, DVec3};
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use petgraph::unionfind::UnionFind;
 
-use crate::math::Libm;
-
+use super::screw::{fit_pivot, project_angle, relative_motions, state_range, unwrap_angles};
 use crate::io::result::ResultJoint;
+use crate::math::Libm;
 
 /// Axes within this angle (degrees) of a related joint's are tried as parallel.
 pub const MAX_ANGLE_DEG: f64 = 10.0;
@@ -28,6 +29,11 @@ pub const MAX_ANGLE_DEG: f64 = 10.0;
 /// related kept group's tied direction is tried on that direction (`followers`), and
 /// related groups whose directions lie within it are tried as one (`joined_groups`).
 pub const FOLLOW_ANGLE_DEG: f64 = 30.0;
+
+/// A revolute joint outside every group after the followers, with an axis within this
+/// angle (degrees) of a related kept group's tied direction, is tried on that
+/// direction with its states and pivot found anew (`kinematics::build`).
+pub const FAR_FOLLOW_ANGLE_DEG: f64 = 90.0;
 
 /// Groups (two or more joints, indices into `joints`) of related joints of one type
 /// whose axes lie within `max_deg` of each other, joined transitively; each group
@@ -258,6 +264,77 @@ pub fn tie_axes(joints: &mut [ResultJoint], groups: &[Vec<usize>], followers: &[
     }
 }
 
+/// A follower's joint taken onto its tied axis from afar: its state in each frame is
+/// the turn about the new axis that carries the child's longest principal direction
+/// (its canonical points `pts`) where the observed relative motion (the merged parts'
+/// poses `poses`) carries it, and its pivot the point about which those turns best
+/// carry the child's centroid. The states fitted about the old axis mean nothing about
+/// the new one, and a round link's Step-1 poses spin about its own axis by any
+/// amount: the direction of that axis and the centroid are what the clouds show. A
+/// child whose principal direction lies within 30° of the axis has its states from
+/// the whole rotation instead (`project_angle`).
+pub fn reproject(
+    joint: &mut ResultJoint,
+    poses: &[Vec<DMat4>],
+    pts: &[DVec3],
+    canonical: usize,
+    limit_pad: f64,
+) {
+    let axis = DVec3::from_array(joint.axis).normalize_or(DVec3::Z);
+    let parts = poses.first().map_or(0, |f| f.len());
+    if joint.parent >= parts || joint.child >= parts || pts.len() < 3 {
+        return;
+    }
+    let rel = relative_motions(poses, joint.parent, joint.child, canonical);
+    let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
+    let mut cov = Matrix3::<f64>::zeros();
+    for p in pts {
+        let d = *p - c;
+        let v = Vector3::new(d.x, d.y, d.z);
+        cov += v * v.transpose();
+    }
+    let e = SymmetricEigen::new(cov);
+    let k = e.eigenvalues.imax();
+    let d0 = DVec3::new(
+        e.eigenvectors[(0, k)],
+        e.eigenvectors[(1, k)],
+        e.eigenvectors[(2, k)],
+    );
+    let flat = |d: DVec3| d - axis * d.dot(axis);
+    let u0 = flat(d0);
+    let raw: Vec<f64> = rel
+        .iter()
+        .map(|q| {
+            let r = DMat3::from_mat4(*q);
+            if u0.length() < 0.5 {
+                return project_angle(axis, &r);
+            }
+            let ut = flat(r * d0);
+            axis.dot(u0.cross(ut)).latan2(u0.dot(ut))
+        })
+        .collect();
+    let mut states = unwrap_angles(raw);
+    let zero = states.get(canonical).copied().unwrap_or(0.0);
+    for q in &mut states {
+        *q -= zero;
+    }
+    let rs: Vec<DMat3> = states
+        .iter()
+        .map(|&q| DMat3::from_axis_angle(axis, q))
+        .collect();
+    let ts: Vec<DVec3> = rel
+        .iter()
+        .zip(&rs)
+        .map(|(q, r)| q.transform_point3(c) - *r * c)
+        .collect();
+    let pivot = fit_pivot(&rs, &ts, DVec3::from_array(joint.pivot));
+    let (lo, hi) = state_range(&states);
+    let pad = (hi - lo) * limit_pad;
+    joint.pivot = pivot.to_array();
+    joint.state = states;
+    joint.limits = [lo - pad, hi + pad];
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -379,5 +456,61 @@ mod tests {
             assert!((joints[0].axis[i] - w).abs() < 1e-12);
             assert!((joints[1].axis[i] + w).abs() < 1e-12);
         }
+    }
+
+    #[test]
+    fn a_far_follower_gets_the_turns_of_its_link_about_the_new_axis() {
+        use crate::geom::se3::rigid;
+        // A round leg (part 1, below the hip at (0.3, 0, 0)) swings about y from a
+        // still body (part 0); its Step-1 poses also spin it about its own long axis
+        // by any amount, and its joint was fitted about another axis.
+        let hip = DVec3::new(0.3, 0.0, 0.0);
+        let swing = [0.0, 0.3, -0.2, 0.5, 0.1];
+        let spin = [0.0, 1.9, -2.4, 0.7, 3.0];
+        // Rings of 8 points about a long axis tilted out of the swing's plane: it is
+        // exactly the leg's principal direction, and a spin about it is not a turn
+        // about z (which the whole rotation's turn about y would ignore).
+        let leg_axis = DVec3::new(0.0, 0.6, -0.8);
+        let side = DVec3::X;
+        let up = leg_axis.cross(side);
+        let leg: Vec<DVec3> = (0..48)
+            .map(|i| {
+                let a = (i % 8) as f64 * std::f64::consts::FRAC_PI_4;
+                let along = 0.02 + 0.03 * (i / 8) as f64;
+                hip + leg_axis * along + (side * a.lcos() + up * a.lsin()) * 0.03
+            })
+            .collect();
+        let centre = leg.iter().copied().sum::<DVec3>() / leg.len() as f64;
+        let poses: Vec<Vec<DMat4>> = swing
+            .iter()
+            .zip(&spin)
+            .map(|(&q, &s)| {
+                let about = |axis: DVec3, angle: f64, at: DVec3| {
+                    let r = DMat3::from_axis_angle(axis, angle);
+                    rigid(r, at - r * at)
+                };
+                let m = about(DVec3::Y, q, hip) * about(leg_axis, s, centre);
+                vec![DMat4::IDENTITY, m]
+            })
+            .collect();
+        let mut joint = ResultJoint {
+            child: 1,
+            parent: 0,
+            joint_type: JointType::Revolute,
+            // Already tied to the group's direction (sense reversed), the pivot and
+            // states still the old fit's.
+            axis: [0.0, -1.0, 0.0],
+            pivot: [0.25, 0.04, -0.1],
+            state: spin.to_vec(),
+            limits: [-2.4, 3.0],
+        };
+        reproject(&mut joint, &poses, &leg, 0, 0.0);
+        for (got, want) in joint.state.iter().zip(&swing) {
+            assert!((got + want).abs() < 1e-9, "{:?}", joint.state);
+        }
+        // On the hip's line along y (its y taken from the old pivot).
+        let p = DVec3::from_array(joint.pivot);
+        assert!((p - DVec3::new(0.3, 0.04, 0.0)).length() < 1e-9, "{p}");
+        assert!((joint.limits[0] + 0.5).abs() < 1e-9 && (joint.limits[1] - 0.2).abs() < 1e-9);
     }
 }
