@@ -15,10 +15,13 @@
 //! clouds as well as without them.
 
 use glam::{DMat3, DMat4, DVec3};
-use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use petgraph::unionfind::UnionFind;
 
-use super::screw::{fit_pivot, project_angle, relative_motions, state_range, unwrap_angles};
+use super::flips::principal_axes;
+use super::screw::{
+    pivot_carrying, project_angle, relative_motions, state_range, turns_carrying, unwrap_angles,
+    zeroed_at,
+};
 use crate::io::result::ResultJoint;
 use crate::math::Libm;
 
@@ -286,48 +289,24 @@ pub fn reproject(
         return;
     }
     let rel = relative_motions(poses, joint.parent, joint.child, canonical);
-    let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
-    let mut cov = Matrix3::<f64>::zeros();
-    for p in pts {
-        let d = *p - c;
-        let v = Vector3::new(d.x, d.y, d.z);
-        cov += v * v.transpose();
-    }
-    let e = SymmetricEigen::new(cov);
-    let k = e.eigenvalues.imax();
-    let d0 = DVec3::new(
-        e.eigenvectors[(0, k)],
-        e.eigenvectors[(1, k)],
-        e.eigenvectors[(2, k)],
-    );
-    let flat = |d: DVec3| d - axis * d.dot(axis);
-    let u0 = flat(d0);
-    let raw: Vec<f64> = rel
-        .iter()
-        .map(|q| {
-            let r = DMat3::from_mat4(*q);
-            if u0.length() < 0.5 {
-                return project_angle(axis, &r);
-            }
-            let ut = flat(r * d0);
-            axis.dot(u0.cross(ut)).latan2(u0.dot(ut))
-        })
-        .collect();
-    let mut states = unwrap_angles(raw);
-    let zero = states.get(canonical).copied().unwrap_or(0.0);
-    for q in &mut states {
-        *q -= zero;
-    }
-    let rs: Vec<DMat3> = states
-        .iter()
-        .map(|&q| DMat3::from_axis_angle(axis, q))
-        .collect();
-    let ts: Vec<DVec3> = rel
-        .iter()
-        .zip(&rs)
-        .map(|(q, r)| q.transform_point3(c) - *r * c)
-        .collect();
-    let pivot = fit_pivot(&rs, &ts, DVec3::from_array(joint.pivot));
+    let (c, dirs) = principal_axes(pts);
+    let spread = |d: &DVec3| pts.iter().map(|p| (*p - c).dot(*d).powi(2)).sum::<f64>();
+    let d0 = dirs
+        .into_iter()
+        .max_by(|a, b| spread(a).total_cmp(&spread(b)))
+        .unwrap_or(DVec3::Z);
+    let u0 = d0 - axis * d0.dot(axis);
+    let states = if u0.length() < 0.5 {
+        let raw = rel
+            .iter()
+            .map(|q| project_angle(axis, &DMat3::from_mat4(*q)))
+            .collect();
+        zeroed_at(unwrap_angles(raw), canonical)
+    } else {
+        let images: Vec<DVec3> = rel.iter().map(|q| q.transform_vector3(d0)).collect();
+        turns_carrying(&images, u0, axis, canonical)
+    };
+    let pivot = pivot_carrying(&rel, axis, &states, c, DVec3::from_array(joint.pivot));
     let (lo, hi) = state_range(&states);
     let pad = (hi - lo) * limit_pad;
     joint.pivot = pivot.to_array();

@@ -206,6 +206,49 @@ pub fn unwrap_angles(mut a: Vec<f64>) -> Vec<f64> {
     a
 }
 
+/// Per frame, the turn about unit `axis` from `u` to `images[k]` (both taken into the
+/// plane perpendicular to the axis only through the cross and dot products), unwrapped
+/// and 0 at frame `c`: a hinge's states from where it carries one direction.
+pub(crate) fn turns_carrying(images: &[DVec3], u: DVec3, axis: DVec3, c: usize) -> Vec<f64> {
+    let raw = images
+        .iter()
+        .map(|d| {
+            let d = *d - d.dot(axis) * axis;
+            u.cross(d).dot(axis).latan2(u.dot(d))
+        })
+        .collect();
+    zeroed_at(unwrap_angles(raw), c)
+}
+
+/// `states` shifted so that frame `c`'s is 0 (unchanged when there is no frame `c`).
+pub(crate) fn zeroed_at(mut states: Vec<f64>, c: usize) -> Vec<f64> {
+    let s0 = states.get(c).copied().unwrap_or(0.0);
+    states.iter_mut().for_each(|s| *s -= s0);
+    states
+}
+
+/// The pivot about which turns by `states` about unit `axis` carry the point `cen` as
+/// the relative motions `rel` do (`fit_pivot`; `reference` fixes its component along
+/// the axis).
+pub(crate) fn pivot_carrying(
+    rel: &[DMat4],
+    axis: DVec3,
+    states: &[f64],
+    cen: DVec3,
+    reference: DVec3,
+) -> DVec3 {
+    let rs: Vec<DMat3> = states
+        .iter()
+        .map(|&s| DMat3::from_axis_angle(axis, s))
+        .collect();
+    let ts: Vec<DVec3> = rel
+        .iter()
+        .zip(&rs)
+        .map(|(m, r)| m.transform_point3(cen) - *r * cen)
+        .collect();
+    fit_pivot(&rs, &ts, reference)
+}
+
 /// Point p minimising Σ‖(I − Rₖ) p − tₖ‖², taking the component of every
 /// unconstrained direction (at least the axis) from `reference`.
 pub(crate) fn fit_pivot(rs: &[DMat3], ts: &[DVec3], reference: DVec3) -> DVec3 {

@@ -20,15 +20,16 @@
 //! their motion, their joints fitted again. `kinematics::build` then refines the model
 //! once more and keeps the change only if it still fits (`KEEP_SLACK`).
 
-use crate::math::Libm;
-use glam::{DMat3, DMat4, DVec3, Vec3};
+use glam::{DMat4, DVec3, Vec3};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
 use super::chain::screw_exp;
 use super::flips::{median, principal_axes, spin_axes};
 use super::observed::{points_by_part, trimmed_fit, POLISH_KEEP};
 use super::project::bfs_order;
-use super::screw::{fit_pivot, fit_prismatic, fit_revolute, state_range, unwrap_angles};
+use super::screw::{
+    fit_prismatic, fit_revolute, pivot_carrying, state_range, turns_carrying, unwrap_angles,
+};
 use crate::geom::knn::Grid;
 use crate::geom::se3::{from_row_major, rigid_inverse, to_row_major};
 use crate::io::gt::JointType;
@@ -299,26 +300,8 @@ fn spin_free(
     let n = DVec3::new(n[0], n[1], n[2]);
     // Exactly perpendicular to u, so that u's images stay on one great circle.
     let axis = (n - n.dot(u) * u).try_normalize()?;
-    let states: Vec<f64> = images
-        .iter()
-        .map(|d| {
-            let d = d - d.dot(axis) * axis;
-            u.cross(d).dot(axis).latan2(u.dot(d))
-        })
-        .collect();
-    let mut states = unwrap_angles(states);
-    let s0 = states[c];
-    states.iter_mut().for_each(|s| *s -= s0);
-    let rs: Vec<DMat3> = states
-        .iter()
-        .map(|&s| DMat3::from_axis_angle(axis, s))
-        .collect();
-    let ts: Vec<DVec3> = rel
-        .iter()
-        .zip(&rs)
-        .map(|(m, r)| m.transform_point3(cen) - *r * cen)
-        .collect();
-    let pivot = fit_pivot(&rs, &ts, reference);
+    let states = turns_carrying(&images, u, axis, c);
+    let pivot = pivot_carrying(rel, axis, &states, cen, reference);
     Some((axis, pivot, states))
 }
 
@@ -327,6 +310,7 @@ mod tests {
     use super::*;
     use crate::io::result::{ResultTree, FORMAT, VERSION};
     use crate::kinematics::flips::tests::{posed, turn};
+    use crate::math::Libm;
     use rand::{rngs::StdRng, Rng, SeedableRng};
 
     const PIVOT: DVec3 = DVec3::new(0.0, 0.0, 0.12);
