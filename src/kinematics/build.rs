@@ -433,9 +433,8 @@ fn spin_free_refined(
 /// (`parallel::FAR_FOLLOW_ANGLE_DEG`), with their states and pivots found anew along
 /// it (`parallel::reproject`); and then related groups fitted apart as one
 /// (`parallel::joined_groups`). `poses` are the merged parts' Step-1 poses. The axes of
-/// the child parts `free` (the
-/// spin-free hinges) stay free of the axis prior. Returns the kept groups (followers
-/// included), each as its joints' child parts.
+/// the child parts `free` (the spin-free hinges) stay free of the axis prior. Returns
+/// the kept groups (followers included), each as its joints' child parts.
 #[allow(clippy::too_many_arguments)]
 fn parallel_refined(
     result: &mut FitResult,
@@ -576,8 +575,8 @@ impl TieCheck<'_> {
     /// before any tie. Members failing the subtree test are left out (a failing
     /// follower alone, a group with any other failing member) and the rest tried
     /// once more. The followers `anew` are first re-projected onto their tied axes
-    /// (`parallel::reproject`), and the attempt ends when none of them is left. Returns the
-    /// groups kept and their followers.
+    /// (`parallel::reproject`), and the attempt ends when none of them is left.
+    /// Returns the groups kept and their followers.
     fn attempt(
         &self,
         result: &mut FitResult,
