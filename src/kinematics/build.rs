@@ -495,12 +495,10 @@ fn parallel_refined(
     }
     // Then joints still outside every group whose axis lies farther from a kept
     // group's direction, with their states and pivots found anew along it.
-    let far = followers(joints_of(result), &kept.groups, FAR_FOLLOW_ANGLE_DEG);
-    let far: Vec<(usize, usize)> = far
+    // (`followers` passes over the kept groups' members, their followers among them.)
+    let far: Vec<(usize, usize)> = followers(joints_of(result), &kept.groups, FAR_FOLLOW_ANGLE_DEG)
         .into_iter()
-        .filter(|&(j, _)| {
-            !kept.followers.contains(&j) && joints_of(result)[j].joint_type == JointType::Revolute
-        })
+        .filter(|&(j, _)| joints_of(result)[j].joint_type == JointType::Revolute)
         .collect();
     if !far.is_empty() {
         let mut with = kept.groups.clone();
