@@ -776,6 +776,13 @@ pub fn finish(
             crate::kinematics::parallel::MAX_ANGLE_DEG
         ));
     }
+    if !kin.half_turns.is_empty() {
+        let parts: Vec<String> = kin.half_turns.iter().map(usize::to_string).collect();
+        notes.push(format!(
+            "joint states mended where they were half a turn off their path (joints by child part: {}): the link was posed end over end in some frames, and the model refitted from continuous states fits the clouds as well",
+            parts.join(", ")
+        ));
+    }
     if kin.swept > 0 {
         notes.push(format!(
             "{} part poses were replaced by a pose found along their joints (a better fit to the cloud, or one as good on a smoother path of joint states)",
@@ -804,6 +811,7 @@ pub fn finish(
         "joint_sweeps": kin.swept,
         "invisible_joints": invisible,
         "parallel_axes": kin.parallel,
+        "half_turns": kin.half_turns,
         "refine": kin.refine,
         "notes": notes,
     }));

@@ -8,6 +8,7 @@ use glam::{DMat4, DVec3, Vec3};
 use serde::Serialize;
 
 use super::flips::Repair;
+use super::half_turns::settle_half_turns;
 use super::invisible_joints::invisible_joints;
 use super::merge::{absorb, merge_loss, merge_parts, MergeEvent, MergeOptions};
 use super::observed::{
@@ -63,6 +64,11 @@ pub struct KinOptions {
     /// that lie within `parallel::MAX_ANGLE_DEG` of each other to their mean
     /// direction, where the model then fits the clouds as well (`kinematics::parallel`).
     pub parallel: bool,
+    /// After the tied axes, propose anew the revolute joints whose states leave their
+    /// path by half a turn in some frames (a round link posed end over end), refine
+    /// once more and keep it where the model fits the clouds as well
+    /// (`kinematics::half_turns`).
+    pub half_turns: bool,
     /// The refinement keeps the root's observed motion when the root is still
     /// (`root_is_still`, with the merge threshold) instead of refining it. Meant for
     /// occluded input: there the refinement's Chamfer compares frame c's view with
@@ -100,6 +106,7 @@ impl Default for KinOptions {
             flips: true,
             spin_free: true,
             parallel: true,
+            half_turns: true,
             keep_still_root: false,
             absorb_invisible: true,
             restart_pairs: true,
@@ -142,6 +149,9 @@ pub struct KinReport {
     /// Groups of joints (by child part) whose axes were tied parallel
     /// (`kinematics::parallel`).
     pub parallel: Vec<Vec<usize>>,
+    /// Joints (by child part) proposed anew with their states half a turn off their
+    /// path mended (`kinematics::half_turns`).
+    pub half_turns: Vec<usize>,
     /// (stage, seconds) from the caller's clock.
     pub timings: Vec<(String, f64)>,
 }
@@ -445,10 +455,10 @@ fn parallel_refined(
     ro: &RefineOptions,
     limit_pad: f64,
     progress: &mut dyn FnMut(&Progress) -> Control,
-) -> crate::Result<Vec<Vec<usize>>> {
+) -> crate::Result<Tied> {
     let groups = parallel_groups(joints_of(result), MAX_ANGLE_DEG);
     if groups.is_empty() {
-        return Ok(Vec::new());
+        return Ok(Tied::default());
     }
     // The untied model's loss on the refinement's evaluation sample.
     let measure = RefineOptions {
@@ -478,7 +488,7 @@ fn parallel_refined(
         before: &before,
     };
     let Some(mut kept) = tie.attempt(result, groups, Vec::new(), &[], progress)? else {
-        return Ok(Vec::new());
+        return Ok(Tied::default());
     };
     // Then the joints that may follow a kept group, and related groups whose directions
     // agree within the same angle as one.
@@ -523,15 +533,42 @@ fn parallel_refined(
             kept = k;
         }
     }
-    Ok(kept
-        .groups
-        .iter()
-        .map(|g| {
-            let mut ch: Vec<usize> = g.iter().map(|&j| joints_of(result)[j].child).collect();
-            ch.sort_unstable();
-            ch
-        })
-        .collect())
+    Ok(kept)
+}
+
+/// Joints whose states leave their path by half a turn proposed anew
+/// (`half_turns::settle_half_turns`, `poses`: the merged parts' Step-1 poses), then the
+/// model refined once more (`ro`, with the kept ties); kept when the refinement is
+/// accepted and the model's loss stays within 1 % of before. Returns the joints
+/// proposed anew (none when not kept).
+fn half_turns_refined(
+    result: &mut FitResult,
+    poses: &[Vec<DMat4>],
+    points: &[Vec<Vec3>],
+    ro: &RefineOptions,
+    limit_pad: f64,
+    progress: &mut dyn FnMut(&Progress) -> Control,
+) -> crate::Result<Vec<usize>> {
+    const LOSS_SLACK: f64 = 1.01;
+    let c = result.canonical_frame;
+    let by_part = points_by_part(&points[c], &result.labels[c], result.parts);
+    let mut alt = result.clone();
+    let anew = settle_half_turns(&mut alt, poses, &by_part, limit_pad);
+    if anew.is_empty() {
+        return Ok(anew);
+    }
+    let measure = RefineOptions {
+        iters: 0,
+        ..ro.clone()
+    };
+    let base = refine(&mut result.clone(), points, &measure, limit_pad, progress)?.loss_before;
+    let rep = refine(&mut alt, points, ro, limit_pad, progress)?;
+    if rep.accepted && rep.loss_after <= LOSS_SLACK * base {
+        *result = alt;
+        Ok(anew)
+    } else {
+        Ok(Vec::new())
+    }
 }
 
 /// The result's joints (none before Step 3).
@@ -548,6 +585,7 @@ fn joint_indices(result: &FitResult, children: impl Iterator<Item = usize>) -> V
 }
 
 /// Groups kept tied (joint indices) and which of their members are followers.
+#[derive(Default)]
 struct Tied {
     groups: Vec<Vec<usize>>,
     followers: Vec<usize>,
@@ -815,7 +853,7 @@ pub fn build_articulated(
     };
     // The spin-free hinges stay free of the axis prior in the tied refinements too.
     let free: Vec<usize> = spin_free.iter().map(|s| s.child).collect();
-    let parallel = match refine_options(opts, &merged.poses, root) {
+    let tied = match refine_options(opts, &merged.poses, root) {
         Some(ro) if opts.parallel => {
             let t = clock();
             let kept = parallel_refined(
@@ -831,8 +869,39 @@ pub fn build_articulated(
             refine_s += clock() - t;
             kept
         }
+        _ => Tied::default(),
+    };
+    let half_turns = match refine_options(opts, &merged.poses, root) {
+        Some(ro) if opts.half_turns => {
+            let t = clock();
+            let ro = RefineOptions {
+                free_axes: joint_indices(&result, free.iter().copied()),
+                ties: tied.groups.clone(),
+                tie_followers: tied.followers.clone(),
+                ..ro
+            };
+            let anew = half_turns_refined(
+                &mut result,
+                &merged.poses,
+                points,
+                &ro,
+                opts.limit_pad,
+                progress,
+            )?;
+            refine_s += clock() - t;
+            anew.iter().map(|&j| joints_of(&result)[j].child).collect()
+        }
         _ => Vec::new(),
     };
+    let parallel = tied
+        .groups
+        .iter()
+        .map(|g| {
+            let mut ch: Vec<usize> = g.iter().map(|&j| joints_of(&result)[j].child).collect();
+            ch.sort_unstable();
+            ch
+        })
+        .collect();
     let canon_labels = result.labels[canonical].clone();
     let poses_replaced = match opts.pose_tolerance {
         Some(tol) => {
@@ -882,6 +951,7 @@ pub fn build_articulated(
         swept,
         spin_free,
         parallel,
+        half_turns,
         timings,
     };
     Ok((result, report))

@@ -6,6 +6,7 @@ pub mod chain;
 pub mod coverage;
 pub mod flips;
 pub mod frame_gmm;
+pub mod half_turns;
 pub mod invisible_joints;
 pub mod joint_sweep;
 pub mod merge;
