@@ -834,7 +834,9 @@ pub fn build_articulated(
         );
     };
     let mut result = result;
-    let spin_free = match (refine_options(opts, &merged.poses, root), &refine_report) {
+    // The refinement's options for the steps after the first refinement.
+    let ro_after = refine_options(opts, &merged.poses, root);
+    let spin_free = match (ro_after.clone(), &refine_report) {
         (Some(ro), Some(rep)) if opts.spin_free => {
             let t = clock();
             let kept = spin_free_refined(
@@ -853,7 +855,7 @@ pub fn build_articulated(
     };
     // The spin-free hinges stay free of the axis prior in the tied refinements too.
     let free: Vec<usize> = spin_free.iter().map(|s| s.child).collect();
-    let tied = match refine_options(opts, &merged.poses, root) {
+    let tied = match ro_after.clone() {
         Some(ro) if opts.parallel => {
             let t = clock();
             let kept = parallel_refined(
@@ -871,7 +873,7 @@ pub fn build_articulated(
         }
         _ => Tied::default(),
     };
-    let half_turns = match refine_options(opts, &merged.poses, root) {
+    let half_turns = match ro_after {
         Some(ro) if opts.half_turns => {
             let t = clock();
             let ro = RefineOptions {

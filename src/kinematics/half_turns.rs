@@ -19,7 +19,7 @@ use std::f64::consts::PI;
 
 use glam::{DMat4, DVec3};
 
-use super::screw::{pivot_carrying, relative_motions, state_range, zeroed_at};
+use super::screw::{padded_limits, pivot_carrying, relative_motions, zeroed_at};
 use crate::io::gt::JointType;
 use crate::io::result::FitResult;
 
@@ -92,9 +92,7 @@ pub fn settle_half_turns(
         let reference = DVec3::from_array(joint.pivot);
         joint.pivot = pivot_carrying(&rel, axis, &states, centroid, reference).to_array();
         anew.push(j);
-        let (lo, hi) = state_range(&states);
-        let pad = (hi - lo) * limit_pad;
-        joint.limits = [lo - pad, hi + pad];
+        joint.limits = padded_limits(&states, limit_pad);
         joint.state = states;
     }
     anew
@@ -103,14 +101,9 @@ pub fn settle_half_turns(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geom::se3::{rigid, to_row_major};
+    use crate::geom::se3::to_row_major;
     use crate::io::result::{ResultJoint, ResultTree};
-    use glam::DMat3;
-
-    fn about(axis: DVec3, angle: f64, at: DVec3) -> DMat4 {
-        let r = DMat3::from_axis_angle(axis, angle);
-        rigid(r, at - r * at)
-    }
+    use crate::kinematics::flips::turn_about;
 
     #[test]
     fn states_are_made_continuous_modulo_half_a_turn() {
@@ -153,7 +146,7 @@ mod tests {
             .map(|(&q, f)| {
                 vec![
                     DMat4::IDENTITY,
-                    about(DVec3::Y, q, hip) * about(DVec3::X, half(f), centre),
+                    turn_about(DVec3::Y, q, hip) * turn_about(DVec3::X, half(f), centre),
                 ]
             })
             .collect();

@@ -19,7 +19,7 @@ use petgraph::unionfind::UnionFind;
 
 use super::flips::principal_axes;
 use super::screw::{
-    pivot_carrying, project_angle, relative_motions, state_range, turns_carrying, unwrap_angles,
+    padded_limits, pivot_carrying, project_angle, relative_motions, turns_carrying, unwrap_angles,
     zeroed_at,
 };
 use crate::io::result::ResultJoint;
@@ -307,11 +307,9 @@ pub fn reproject(
         turns_carrying(&images, u0, axis, canonical)
     };
     let pivot = pivot_carrying(&rel, axis, &states, c, DVec3::from_array(joint.pivot));
-    let (lo, hi) = state_range(&states);
-    let pad = (hi - lo) * limit_pad;
     joint.pivot = pivot.to_array();
+    joint.limits = padded_limits(&states, limit_pad);
     joint.state = states;
-    joint.limits = [lo - pad, hi + pad];
 }
 
 #[cfg(test)]

@@ -11,7 +11,7 @@ use glam::DMat4;
 use serde::Serialize;
 
 use super::chain::screw_exp;
-use super::screw::{fit_screw, one_dof_loss, state_range, PartExtent};
+use super::screw::{fit_screw, one_dof_loss, padded_limits, PartExtent};
 use crate::geom::se3::{rigid_inverse, to_row_major};
 use crate::io::gt::JointType;
 use crate::io::result::{FitResult, ResultJoint, ResultTree, FORMAT, VERSION};
@@ -92,8 +92,6 @@ pub fn project_joints(
         for (f, &s) in fk.iter_mut().zip(&fit.states) {
             f[b] = f[a] * screw_exp(fit.joint_type, fit.axis, fit.pivot, s);
         }
-        let (lo, hi) = state_range(&fit.states);
-        let pad = (hi - lo) * limit_pad;
         residuals.push(JointResidual {
             child: b,
             parent: a,
@@ -108,8 +106,8 @@ pub fn project_joints(
             joint_type: fit.joint_type,
             axis: fit.axis.to_array(),
             pivot: fit.pivot.to_array(),
+            limits: padded_limits(&fit.states, limit_pad),
             state: fit.states,
-            limits: [lo - pad, hi + pad],
         });
     }
     joints.sort_by_key(|j| j.child);

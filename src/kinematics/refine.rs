@@ -51,7 +51,7 @@ use serde::Serialize;
 
 use super::chain::screw_exp;
 use super::project::bfs_order;
-use super::screw::{state_range, unwrap_angles};
+use super::screw::{padded_limits, unwrap_angles};
 use crate::geom::assignment::Lap;
 use crate::geom::knn::{Grid, LastMatches};
 use crate::geom::se3::{from_row_major, to_row_major};
@@ -703,9 +703,7 @@ fn write_back(result: &mut FitResult, m: &Model, x: &[f64], limit_pad: f64) {
                 // Whole turns change no pose; keep the states continuous (sensible limits).
                 jt.state = unwrap_angles(std::mem::take(&mut jt.state));
             }
-            let (lo, hi) = state_range(&jt.state);
-            let pad = (hi - lo) * limit_pad;
-            jt.limits = [lo - pad, hi + pad];
+            jt.limits = padded_limits(&jt.state, limit_pad);
         }
     }
     let poses: Vec<Vec<DMat4>> = (0..k).map(|t| m.poses(x, t)).collect();

@@ -88,6 +88,13 @@ pub fn dev_from_identity(m: &DMat4) -> f64 {
     d.to_cols_array().iter().map(|v| v * v).sum()
 }
 
+/// A joint's limits: its state range widened by `pad` of its length on each side.
+pub fn padded_limits(states: &[f64], pad: f64) -> [f64; 2] {
+    let (lo, hi) = state_range(states);
+    let w = (hi - lo) * pad;
+    [lo - w, hi + w]
+}
+
 /// (min, max) of a joint's states.
 pub fn state_range(states: &[f64]) -> (f64, f64) {
     states

@@ -28,7 +28,7 @@ use super::flips::{median, principal_axes, spin_axes};
 use super::observed::{points_by_part, trimmed_fit, POLISH_KEEP};
 use super::project::bfs_order;
 use super::screw::{
-    fit_prismatic, fit_revolute, pivot_carrying, state_range, turns_carrying, unwrap_angles,
+    fit_prismatic, fit_revolute, padded_limits, pivot_carrying, turns_carrying, unwrap_angles,
 };
 use crate::geom::knn::Grid;
 use crate::geom::se3::{from_row_major, rigid_inverse, to_row_major};
@@ -214,9 +214,7 @@ fn set_joint(j: &mut ResultJoint, axis: DVec3, pivot: DVec3, states: Vec<f64>, l
         JointType::Revolute => unwrap_angles(states),
         JointType::Prismatic => states,
     };
-    let (lo, hi) = state_range(&states);
-    let pad = (hi - lo) * limit_pad;
-    j.limits = [lo - pad, hi + pad];
+    j.limits = padded_limits(&states, limit_pad);
     j.axis = axis.to_array();
     j.pivot = pivot.to_array();
     j.state = states;
@@ -382,7 +380,7 @@ mod tests {
                 joint_type: JointType::Revolute,
                 axis: axis.to_array(),
                 pivot: PIVOT.to_array(),
-                limits: state_range(&state).into(),
+                limits: padded_limits(&state, 0.0),
                 state,
             }]),
             root_motion: None,
