@@ -311,6 +311,7 @@ mod cli {
             working_size,
             restarts: None,
             medial_init: false,
+            from_last_frame: false,
         })
     }
 

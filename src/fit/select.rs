@@ -213,6 +213,8 @@ pub fn prepare(seq: &Sequence, opts: &FitOptions) -> Result<Prepared> {
     }
     let order = if occluded {
         FrameOrder::from_start(sizes.len(), start_frame::most_points(&sizes))
+    } else if opts.from_last_frame {
+        FrameOrder::from_start(sizes.len(), sizes.len().saturating_sub(1))
     } else {
         FrameOrder::identity(sizes.len())
     };
@@ -262,6 +264,7 @@ impl PrepareCache {
             opts.occlusion,
             opts.seed,
             opts.working_size,
+            opts.from_last_frame,
         )
             .hash(&mut h);
         let key = h.finish();
@@ -1208,6 +1211,22 @@ mod size_rule_tests {
         .unwrap();
         assert_eq!(full.order, FrameOrder::identity(4));
         assert_eq!(full.data.track_from, vec![0, 0, 1, 2]);
+        // Unless asked to start from the last frame (the balanced preset's third
+        // attempt): the frames backwards, each tracked from the one after it, and the
+        // last frame is the canonical one.
+        let last_opts = FitOptions {
+            occlusion: Occlusion::Off,
+            from_last_frame: true,
+            ..opts
+        };
+        let last = prepare(&seq, &last_opts).unwrap();
+        assert_eq!(last.order.order, vec![3, 2, 1, 0]);
+        assert_eq!(last.data.track_from, vec![0, 0, 1, 2]);
+        let r = run_candidate(&last, 2, &last_opts, &mut |_| Control::Continue).unwrap();
+        assert_eq!(r.canonical, 3);
+        for (k, f) in seq.frames.iter().enumerate() {
+            assert_eq!(r.labels[k], r.model.segment(k, &f.points), "frame {k}");
+        }
     }
 
     #[test]

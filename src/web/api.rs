@@ -341,6 +341,49 @@ pub fn retry_look(
     Ok(o.into())
 }
 
+/// A third attempt at the whole fit when the result kept after the second (JSON),
+/// fitted with `options`, asks for one (`pipeline::third_wanted`: balanced, full input,
+/// still much of the clouds unexplained): `{unexplained}` (the kept result's share), or
+/// `undefined`. The third attempt is fitted with `from_last_frame` set
+/// (`pipeline::third_options`).
+#[wasm_bindgen]
+pub fn third_wanted(result_json: &str, options: JsValue) -> Result<JsValue, JsError> {
+    let opts = options_from_js(options)?;
+    let kept = FitResult::from_json(result_json, "kept attempt's result").map_err(js_err)?;
+    if !crate::pipeline::third_wanted(&kept, &opts) {
+        return Ok(JsValue::UNDEFINED);
+    }
+    let share = crate::pipeline::unexplained_share(&kept).unwrap_or(f64::NAN);
+    let o = Object::new();
+    set(&o, "unexplained", &JsValue::from_f64(share));
+    Ok(o.into())
+}
+
+/// The core's look at the attempt kept after the second and the third
+/// (`pipeline::third_look`): `{third, result}`, where `third` says whether the third
+/// attempt was kept and `result` is the kept result's JSON with the look recorded (the
+/// earlier one's unchanged when the look cannot be made).
+#[wasm_bindgen]
+pub fn third_look(kept_json: &str, third_json: &str) -> Result<JsValue, JsError> {
+    let kept = FitResult::from_json(kept_json, "kept attempt's result").map_err(js_err)?;
+    let third = FitResult::from_json(third_json, "third attempt's result").map_err(js_err)?;
+    let o = Object::new();
+    let Some(look) = crate::pipeline::third_look(&kept, &third) else {
+        set(&o, "third", &JsValue::FALSE);
+        set(&o, "result", &JsValue::from_str(kept_json));
+        return Ok(o.into());
+    };
+    let (mut out, other) = if look.take_second {
+        (third, kept)
+    } else {
+        (kept, third)
+    };
+    crate::pipeline::record_third(&mut out, &look, &other);
+    set(&o, "third", &JsValue::from_bool(look.take_second));
+    set(&o, "result", &JsValue::from_str(&out.to_json()));
+    Ok(o.into())
+}
+
 /// The candidate the core's rule selects among `(m, loss)` pairs (lowest final
 /// Chamfer, ties to the smaller m), so the page knows which worker goes on.
 #[wasm_bindgen]

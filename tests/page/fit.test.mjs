@@ -4,7 +4,8 @@
 // Also: cancelling a fit leaves the page usable with the frames loaded, fast tries
 // every part count on occluded frames (the core's rule), fast tries one part count
 // above the range when the top of it fails, a poorly explained balanced fit is done
-// again from another seed, and the page's results equal the CLI's bit for bit (talos
+// again from another seed (and a third time from the last frame when the kept attempt
+// still explains little), and the page's results equal the CLI's bit for bit (talos
 // full, the procedural cabinet, so101 occluded).
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
@@ -289,7 +290,7 @@ test('fast tries one more part count when the top of the range fails, as the CLI
   assert.ok(got.info.notes.some((n) => /so m = 20 was tried too/.test(n)), 'the notes say why m = 20 was tried');
 });
 
-test('a poorly explained balanced fit is done again from another seed, as the CLI does', { timeout: FIT_TIMEOUT, skip: NO_CLI }, async () => {
+test('a poorly explained balanced fit is done again from another seed, and a third time from the last frame, as the CLI does', { timeout: FIT_TIMEOUT, skip: NO_CLI }, async () => {
   // The procedural cabinet (generator seed 0) at m = 3–4 leaves 1.35 % of its points
   // unexplained from fit seed 0, above the core's bound (`pipeline::RETRY_UNEXPLAINED`).
   const dir = path.join(ARTIFACTS, 'cabinet-seq');
@@ -308,6 +309,12 @@ test('a poorly explained balanced fit is done again from another seed, as the CL
   assert.equal(got.info.retry.first[0], 0);
   assert.match(status, new RegExp(`Fitted twice \\(seeds 0 and ${got.info.retry.second[0]}\\); the (first|second) was kept`));
   assert.ok(got.info.notes.some((n) => /^second attempt/.test(n)), 'the notes say why the fit was done twice');
+  // The kept attempt still leaves more than the bound unexplained, so both fit a third
+  // time from the last frame (`pipeline::third_wanted`) and keep the same one.
+  assert.ok(want.info.third, 'the CLI made a third attempt');
+  assert.deepEqual(got.info.third, want.info.third, 'the same third attempt and the same one kept');
+  assert.match(status, /A third attempt from the last frame; the (third|earlier one) was kept/);
+  assert.ok(got.info.notes.some((n) => /^third attempt/.test(n)), 'the notes say why the fit was done a third time');
 });
 
 test('an occluded fit in the page gives the CLI result bit for bit', { timeout: FIT_TIMEOUT, skip: (!OCCLUDED && 'bench-dev not found') || NO_CLI }, async () => {

@@ -698,6 +698,29 @@ async function startFit() {
         out = { ...kept, result: look.result, finishMs: first.finishMs + second.finishMs };
         retried = `Fitted twice (seeds ${opts.seed} and ${seed}); the ${look.second ? 'second' : 'first'} was kept. `;
       }
+      // Still much unexplained: a third attempt with the Gaussians placed on the last
+      // frame (`pipeline::third_wanted`, `pipeline::third_look`), as `gsart fit` does.
+      const third = wasm.third_wanted(out.result, opts);
+      if (third !== undefined && S.job === job) {
+        const kept = out;
+        const share3 = (100 * third.unexplained).toFixed(2);
+        buildStages(!!gtOk);
+        S.chart.clear('Step 1 loss');
+        $('fit-status').innerHTML = `The model kept left ${share3} % of the points unexplained: fitting a third time, with the Gaussians placed on the last frame. ${trying}`;
+        let res3 = null;
+        try {
+          res3 = await attempt({ ...opts, from_last_frame: true });
+        } catch (e) {
+          if (e instanceof CancelledError || S.job !== job) throw e;
+          console.warn('third attempt:', e);
+        }
+        if (res3) {
+          const look = wasm.third_look(kept.result, res3.result);
+          const k = look.third ? res3 : kept;
+          out = { ...k, result: look.result, finishMs: kept.finishMs + res3.finishMs };
+          retried += `A third attempt from the last frame; the ${look.third ? 'third' : 'earlier one'} was kept. `;
+        }
+      }
     }
   } catch (e) {
     if (S.job !== job) return; // replaced or cancelled by a new load
