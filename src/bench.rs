@@ -27,7 +27,8 @@ pub struct BenchRow {
     pub ms_per_iter: f64,
     pub iterations: usize,
     /// Whole fits done: 2 when the pipeline fitted again from another seed
-    /// (`pipeline::retry_wanted`); the times then cover both attempts.
+    /// (`pipeline::retry_wanted`), 3 when it then fitted from the last frame too
+    /// (`pipeline::third_wanted`); the times then cover every attempt.
     pub attempts: usize,
     pub step1_s: f64,
     pub kinematics_s: f64,
@@ -62,7 +63,11 @@ impl BenchReport {
             s += &format!(
                 "| {}{} | {}×{} | {}–{} | {} | {:.2} | {} | {:.1} | {:.1} | {:.1} | {} | {} | {} | {} | {} |\n",
                 r.name,
-                if r.attempts > 1 { " (fitted twice)" } else { "" },
+                match r.attempts {
+                    2 => " (fitted twice)",
+                    3 => " (fitted three times)",
+                    _ => "",
+                },
                 r.frames,
                 r.points,
                 r.parts_range.0,
@@ -103,13 +108,20 @@ pub fn run_one(
     let out = pipeline::fit(seq, opts, &quiet)?;
     let total_s = t0.elapsed().as_secs_f64();
     let info = out.result.info.clone().unwrap_or_default();
-    // A second attempt's Step 1 counts too (`info.retry.step1_seconds`: both attempts').
+    // A second attempt's Step 1 counts too (`info.retry.step1_seconds`: both attempts'),
+    // and a third's (`info.third.step1_seconds`).
     let retry_step1 = info["retry"]["step1_seconds"]
         .as_array()
         .map(|a| a.iter().map(|v| v.as_f64().unwrap_or(0.0)).sum::<f64>());
-    let attempts = if retry_step1.is_some() { 2 } else { 1 };
+    let third_step1 = info["third"]["step1_seconds"].as_f64();
+    let attempts = match (retry_step1, third_step1) {
+        (Some(_), Some(_)) => 3,
+        (Some(_), None) => 2,
+        _ => 1,
+    };
     let step1_s = retry_step1
         .or_else(|| info["step1_seconds"].as_f64())
+        .map(|s| s + third_step1.unwrap_or(0.0))
         .unwrap_or(f64::NAN);
     let mut per_iter: Vec<f64> = info["candidates_timing"]
         .as_array()

@@ -482,6 +482,12 @@ pub fn third_look(
 ) -> Option<RetryLook> {
     let (u1, u3) = (unexplained_share(kept)?, unexplained_share(third)?);
     let take_third = u1 > SECOND_LOOK_RATIO * u3;
+    let step1 = third
+        .info
+        .as_ref()
+        .and_then(|i| i.get("step1_seconds"))
+        .cloned()
+        .unwrap_or(serde_json::Value::Null);
     let lead = format!(
         "third attempt: the model kept after two attempts left {:.2} % of the points unexplained (above {:.2} %), so the fit was done again with the Gaussians placed on the last frame, which left {:.2} %",
         100.0 * u1,
@@ -500,6 +506,7 @@ pub fn third_look(
             "kept": u1,
             "third": u3,
             "taken": if take_third { "third" } else { "kept" },
+            "step1_seconds": step1,
         }),
     })
 }
