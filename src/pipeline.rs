@@ -412,13 +412,6 @@ pub fn retry_look(
 ) -> Option<RetryLook> {
     let (u1, u2) = (unexplained_share(first)?, unexplained_share(second)?);
     let take_second = u1 > SECOND_LOOK_RATIO * u2;
-    let step1 = |r: &crate::io::result::FitResult| {
-        r.info
-            .as_ref()
-            .and_then(|i| i.get("step1_seconds"))
-            .cloned()
-            .unwrap_or(serde_json::Value::Null)
-    };
     let (s1, s2) = seeds;
     let lead = format!(
         "second attempt: the fit from seed {s1} left {:.2} % of the points unexplained (above {:.2} %), so the fit was done again from seed {s2}, which left {:.2} %",
@@ -438,7 +431,7 @@ pub fn retry_look(
             "first": [s1, u1],
             "second": [s2, u2],
             "taken": if take_second { s2 } else { s1 },
-            "step1_seconds": [step1(first), step1(second)],
+            "step1_seconds": [step1_seconds(first), step1_seconds(second)],
         }),
     })
 }
@@ -482,12 +475,6 @@ pub fn third_look(
 ) -> Option<RetryLook> {
     let (u1, u3) = (unexplained_share(kept)?, unexplained_share(third)?);
     let take_third = u1 > SECOND_LOOK_RATIO * u3;
-    let step1 = third
-        .info
-        .as_ref()
-        .and_then(|i| i.get("step1_seconds"))
-        .cloned()
-        .unwrap_or(serde_json::Value::Null);
     let lead = format!(
         "third attempt: the model kept after two attempts left {:.2} % of the points unexplained (above {:.2} %), so the fit was done again with the Gaussians placed on the last frame, which left {:.2} %",
         100.0 * u1,
@@ -506,7 +493,7 @@ pub fn third_look(
             "kept": u1,
             "third": u3,
             "taken": if take_third { "third" } else { "kept" },
-            "step1_seconds": step1,
+            "step1_seconds": step1_seconds(third),
         }),
     })
 }
@@ -555,6 +542,16 @@ pub fn record_third(
         }
     }
     record_look(result, "third", &look.note, &look.info);
+}
+
+/// An attempt's Step-1 seconds (`info.step1_seconds`), for the looks' records.
+fn step1_seconds(result: &crate::io::result::FitResult) -> serde_json::Value {
+    result
+        .info
+        .as_ref()
+        .and_then(|i| i.get("step1_seconds"))
+        .cloned()
+        .unwrap_or(serde_json::Value::Null)
 }
 
 /// Writes a retry look into the kept result's info (`retry`, and its note).
