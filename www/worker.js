@@ -6,6 +6,8 @@
 //               {id, type: 'example', name, seed}
 //               {id, type: 'start', frames: [Float32Array], names, m, options}  (keeps the candidate)
 //               {id, type: 'finish', m, frames, names, options, gt?, labels?}  (Steps 2–3 on candidate m)
+//               {id, type: 'copy', m}     (candidate m as bytes, for another worker; kept here too)
+//               {id, type: 'put', bytes}  (a candidate another worker copied, to finish here)
 // Messages out: {id, type: 'progress', ...} (≤ ~20/s), {id, type: 'result', ...}, {id, type: 'error', message}
 // Cancel: the page terminates the worker (a running wasm loop cannot read messages).
 import init, * as gsart from './pkg/gsart.js';
@@ -59,6 +61,16 @@ async function handle(msg) {
         (p) => postProgress(id, { m: msg.m, ...p }));
       self.postMessage({ id, type: 'result', m: msg.m, loss: c.loss, iterations: c.iterations,
         occlusionUsed: c.occlusion_used, ms: performance.now() - t0 });
+      break;
+    }
+    case 'copy': {
+      const bytes = gsart.candidate_bytes(msg.m);
+      self.postMessage({ id, type: 'result', bytes }, [bytes.buffer]);
+      break;
+    }
+    case 'put': {
+      const m = gsart.put_candidate(msg.bytes);
+      self.postMessage({ id, type: 'result', m });
       break;
     }
     case 'finish': {

@@ -2,6 +2,7 @@
 //! gradients, optimiser, initialisation, schedule, model selection).
 
 pub mod adam;
+pub mod candidate_bytes;
 pub mod fitter;
 pub mod flow;
 pub mod gaussians;

@@ -233,6 +233,39 @@ pub fn fit_candidate(
     Ok(o.into())
 }
 
+/// A copy of Step-1 candidate `m` held by this worker, as bytes
+/// (`fit::candidate_bytes`), so another worker can finish it beside this one's; this
+/// worker keeps its own.
+#[wasm_bindgen]
+pub fn candidate_bytes(m: usize) -> Result<Vec<u8>, JsError> {
+    CANDIDATES
+        .with(|c| {
+            c.borrow()
+                .iter()
+                .find(|r| r.m == m)
+                .map(crate::fit::candidate_bytes::to_bytes)
+        })
+        .ok_or_else(|| {
+            JsError::new(&format!(
+                "internal: candidate m = {m} is not in this worker"
+            ))
+        })
+}
+
+/// Keeps a candidate another worker sent (`candidate_bytes`), to finish here;
+/// returns its m.
+#[wasm_bindgen]
+pub fn put_candidate(bytes: &[u8]) -> Result<u32, JsError> {
+    let r = crate::fit::candidate_bytes::from_bytes(bytes).map_err(js_err)?;
+    let m = r.m as u32;
+    CANDIDATES.with(|c| {
+        let mut c = c.borrow_mut();
+        c.retain(|o| o.m != r.m);
+        c.push(r);
+    });
+    Ok(m)
+}
+
 /// Steps 2–3 on candidate `m` fitted by this worker (the one the page selected),
 /// with every candidate's `[m, loss]` for the result's notes. Returns the result JSON
 /// (with the canonical points, so it opens on its own).

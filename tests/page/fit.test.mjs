@@ -268,6 +268,8 @@ async function cliAndPage(dir, name, during = async () => {}, { quality = 'fast'
   await page.waitForSelector('#explore:not([hidden])', { timeout: FIT_TIMEOUT });
   const status = await page.locator('#fit-status').innerText();
   const got = JSON.parse(fs.readFileSync(await download(page, '#btn-export-json'), 'utf8'));
+  const movedRunners = await page.evaluate(() => window.gsart.state.movedRunners);
+  const workers = await page.evaluate(() => Math.min(navigator.hardwareConcurrency || 2, 8));
   assert.deepEqual(errors, []);
   await context.close();
   // The whole pipeline gives the CLI's bits: every transcendental function comes from
@@ -277,15 +279,21 @@ async function cliAndPage(dir, name, during = async () => {}, { quality = 'fast'
   assert.deepEqual(got.tree, want.tree, 'the same kinematic tree as the CLI');
   assert.deepEqual(got.poses, want.poses, 'the same poses as the CLI');
   assert.deepEqual(got.labels, want.labels, 'the same labels as the CLI');
-  return { got, want, status };
+  return { got, want, status, movedRunners, workers };
 }
 
 test('fast tries one more part count when the top of the range fails, as the CLI does', { timeout: FIT_TIMEOUT, skip: (!TALOS && 'bench-dev not found') || NO_CLI }, async () => {
   // Talos, fit seed 0: m = 15 ends 3× above m = 10's final Chamfer, so m = 20 is tried.
-  const { got, status } = await cliAndPage(TALOS, 'talos', (page) => page.waitForFunction(
+  const { got, status, movedRunners, workers } = await cliAndPage(TALOS, 'talos', (page) => page.waitForFunction(
     () => /m = 15 fitted worse than m = 10 .*: trying m = 20 too/.test(document.querySelector('#fit-status').innerText),
     null, { timeout: FIT_TIMEOUT }));
   assert.deepEqual(got.info.candidates.map((c) => c[0]), [10, 15, 20]);
+  // The first worker fitted m = 10 and then m = 20, the best and the runner-up: with a
+  // second worker, the runner-up was copied there to finish beside the best, and the
+  // result is still the CLI's bit for bit (compared in `cliAndPage`).
+  assert.deepEqual(got.info.second_look.best[0], 20);
+  assert.deepEqual(got.info.second_look.runner_up[0], 10);
+  assert.deepEqual(movedRunners, [workers >= 2]);
   assert.match(status, /Step 1: m = 10 \(.*\), 15 \(.*\), 20 \(/);
   assert.ok(got.info.notes.some((n) => /so m = 20 was tried too/.test(n)), 'the notes say why m = 20 was tried');
 });

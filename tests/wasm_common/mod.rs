@@ -87,3 +87,33 @@ fn small_fit_gives_the_native_labels_in_wasm() {
     let golden: Vec<u32> = serde_json::from_str(common_small_fit::GOLDEN).unwrap();
     assert_eq!(labels, golden);
 }
+
+/// A Step-1 candidate sent as bytes (how the page moves the runner-up to the other
+/// worker) finishes in wasm exactly as the original does.
+#[wasm_bindgen_test]
+fn a_candidate_moved_as_bytes_finishes_the_same_in_wasm() {
+    use gsart::fit::candidate_bytes::{from_bytes, to_bytes};
+    use gsart::pipeline::{Control, FitOptions, Quality};
+    let seq = generate(&SynthOptions {
+        frames: 4,
+        points: 512,
+        heldout: 0,
+        ..SynthOptions::new(ObjectKind::Laptop)
+    })
+    .unwrap()
+    .sequence;
+    let opts = FitOptions {
+        quality: Quality::Fast,
+        iters: Some(40),
+        ..FitOptions::default()
+    };
+    let r = gsart::pipeline::fit_step1_single(&seq, 3, &opts, &mut |_| Control::Continue).unwrap();
+    let copy = from_bytes(&to_bytes(&r)).unwrap();
+    let finish = |s| {
+        gsart::pipeline::finish(&seq, s, &|| 0.0, &mut |_| Control::Continue)
+            .unwrap()
+            .result
+            .to_json()
+    };
+    assert_eq!(finish(copy), finish(r));
+}

@@ -102,6 +102,7 @@ export class FitJob {
     this.cb = callbacks;
     this.lanes = [];
     this.cancelled = false;
+    this.movedRunner = false; // whether the runner-up was copied to finish beside the best
     this.parallel = Math.min(maxParallel(), this.ms.length);
   }
 
@@ -156,8 +157,26 @@ export class FitJob {
       const rest = done.filter((c) => c.m !== best);
       const runner = rest.length > 0 && !occluded
         ? this.bestOf(rest.map((c) => c.m), rest.map((c) => c.loss)) : null;
-      const keep = new Set([owner.get(best), runner === null ? null : owner.get(runner)]);
+      // When one worker holds both, the runner-up is copied to another worker so the two
+      // finishes run side by side, as natively (`fit::candidate_bytes`).
+      const spare = runner !== null && owner.get(runner) === owner.get(best)
+        ? this.lanes.find((l) => l !== owner.get(best) && !l.dead) ?? null : null;
+      const keep = new Set([owner.get(best), runner === null ? null : owner.get(runner), spare]);
+      const t0 = performance.now();
       for (const l of this.lanes) if (!keep.has(l)) l.terminate();
+      if (spare) {
+        try {
+          const { bytes } = await owner.get(runner).run({ type: 'copy', m: runner });
+          await spare.run({ type: 'put', bytes }, [bytes.buffer]);
+          owner.set(runner, spare);
+          this.movedRunner = true;
+        } catch (e) {
+          // The runner-up then finishes after the best, in the worker that fitted it.
+          if (e instanceof CancelledError || this.cancelled) throw e;
+          console.warn('copying the runner-up to the other worker:', e);
+          spare.terminate();
+        }
+      }
       const finishOn = (m, report) => {
         const { arrays, transfer } = copies(this.frames);
         return owner.get(m).run(
@@ -169,7 +188,6 @@ export class FitJob {
           (msg) => { if (report && msg.type === 'progress') this.cb.onFinishProgress?.(msg); },
         );
       };
-      const t0 = performance.now();
       let r;
       let kept = best;
       if (runner === null) {
@@ -189,7 +207,7 @@ export class FitJob {
       }
       return {
         result: r.result, metrics: r.metrics, metricsError: r.metricsError,
-        candidates: done, best: kept, finishMs: performance.now() - t0,
+        candidates: done, best: kept, finishMs: performance.now() - t0, movedRunner: this.movedRunner,
       };
     } finally {
       for (const l of this.lanes) l.terminate();
