@@ -75,7 +75,7 @@ async function handle(msg) {
     }
     case 'finish': {
       const t0 = performance.now();
-      // Steps 2–3 on the candidate this worker fitted (the best one).
+      // Steps 2–3 on a candidate this worker holds (fitted here, or copied here by 'put').
       const result = gsart.finish(msg.frames, msg.names, msg.m, msg.candidates,
         (p) => postProgress(id, p));
       let metrics = null;

@@ -154,8 +154,9 @@ pub fn natural_order(names: Vec<String>) -> Vec<u32> {
 // ------------------------------------------------------------------ fitting
 
 thread_local! {
-    /// Step-1 candidates fitted by this worker, kept so the worker holding the best one
-    /// can go on with Steps 2–3 without sending the model across workers.
+    /// Step-1 candidates fitted by this worker (or sent to it, `put_candidate`), kept
+    /// so the worker holding the best one can go on with Steps 2–3; only a runner-up
+    /// that shares its worker with the best is copied to another (`candidate_bytes`).
     static CANDIDATES: RefCell<Vec<Step1Result>> = const { RefCell::new(Vec::new()) };
     /// The prepared inputs of the sequence this worker fits, for its next candidate.
     static PREPARED: RefCell<crate::fit::select::PrepareCache> = RefCell::default();
@@ -266,7 +267,8 @@ pub fn put_candidate(bytes: &[u8]) -> Result<u32, JsError> {
     Ok(m)
 }
 
-/// Steps 2–3 on candidate `m` fitted by this worker (the one the page selected),
+/// Steps 2–3 on candidate `m` held by this worker (fitted here, or sent here by
+/// `put_candidate`; the best or the runner-up of the page's selection),
 /// with every candidate's `[m, loss]` for the result's notes. Returns the result JSON
 /// (with the canonical points, so it opens on its own).
 #[wasm_bindgen]
