@@ -85,8 +85,10 @@ export function maxParallel() {
  *   onCandidateStart(m), onWorking(m, frames), onCandidateProgress(m, msg),
  *   onCandidateDone(m, {loss, ms}), onExtraCandidate(m, done), onFinishProgress(msg)
  * `extraCandidate(ms, losses, occluded)`: one more m to fit after the first ones, or null.
- * Resolves with {result, metrics, metricsError, candidates: [{m, loss, ms}], best}
- * (`best`: the kept candidate, the runner-up when the second look took it).
+ * Resolves with {result, metrics, metricsError, candidates: [{m, loss, ms}], best, finishMs,
+ * movedRunner} (`best`: the kept candidate, the runner-up when the second look took it;
+ * `finishMs`: Steps 2–3's wall time; `movedRunner`: whether the runner-up was copied to
+ * another worker to finish beside the best).
  */
 export class FitJob {
   constructor({ frames, names, options, parts, gt, labels, bestOf, extraCandidate, secondLook, callbacks }) {
