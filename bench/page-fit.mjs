@@ -92,7 +92,8 @@ async function pageFit(browser, base, dir, quality) {
     await page.locator(`label:has(input[value=${quality}])`).click();
     const t0 = Date.now();
     await page.locator('#btn-fit').click();
-    await page.waitForSelector('#explore:not([hidden])', { timeout: 60 * 60_000 });
+    // The end of the whole fit (an earlier attempt's model shows while a later one runs).
+    await page.waitForFunction(() => /Done in/.test(document.querySelector('#fit-status').innerText), null, { timeout: 60 * 60_000 });
     const seconds = (Date.now() - t0) / 1000;
     const status = await page.locator('#fit-status').innerText();
     const metrics = await page.locator('#metrics').innerText().catch(() => '');

@@ -40,6 +40,7 @@ const S = {
   // Per attempt of the last fit: whether its runner-up was copied to another worker to
   // finish beside the best (`FitJob.movedRunner`).
   movedRunners: [],
+  resultExtra: {}, // what the result on view was opened with (openResult's `extra`)
 };
 
 // ------------------------------------------------------------------ helpers
@@ -155,8 +156,16 @@ function cancelFit(silent = false) {
   S.job.cancel();
   S.job = null;
   fitUi(false);
+  const provisional = S.model && S.resultExtra?.provisional;
+  if (provisional) {
+    // The earlier attempt's model stays, now as the result.
+    S.resultExtra = { ...S.resultExtra, provisional: null };
+    renderResult(S.resultExtra);
+  }
   if (!silent) {
-    $('fit-status').innerHTML = '<span class="msg-warn">Cancelled.</span> Your frames are still loaded; change the settings and fit again.';
+    $('fit-status').innerHTML = provisional
+      ? '<span class="msg-warn">Cancelled.</span> The model shown, from the attempt before, is the result.'
+      : '<span class="msg-warn">Cancelled.</span> Your frames are still loaded; change the settings and fit again.';
   }
   showFrame(S.current);
 }
@@ -674,6 +683,13 @@ async function startFit() {
       clearTimeout(uiTimer);
     }
   };
+  // A fit done again (a model that leaves much unexplained) shows the model it has so
+  // far while the next attempt runs: it can be explored and exported, and a cancel keeps
+  // it as the result.
+  const showProvisional = (o, note) => {
+    const best = o.candidates.find((c) => c.m === o.best) ?? null;
+    openResult(o.result, S.seqName, 'fit', { best, metrics: o.metrics, metricsError: o.metricsError, provisional: note });
+  };
   const t0 = performance.now();
   S.movedRunners = [];
   const attemptMs = []; // wall time of each finished attempt
@@ -690,9 +706,10 @@ async function startFit() {
       const again = { ...opts, seed };
       const first = out;
       const share = (100 * retry.unexplained).toFixed(2);
+      showProvisional(first, `Provisional: the first attempt's model, shown while a second attempt runs (this one left ${share} % of the points unexplained). Cancel to keep it.`);
       buildStages(!!gtOk);
       S.chart.clear('Step 1 loss');
-      $('fit-status').innerHTML = `The model left ${share} % of the points unexplained: fitting again from seed ${again.seed}. ${trying}`;
+      $('fit-status').innerHTML = `The model left ${share} % of the points unexplained: fitting again from seed ${again.seed}; its model is on view meanwhile, and Cancel keeps it. ${trying}`;
       let second = null;
       try {
         second = await attempt(again);
@@ -713,9 +730,10 @@ async function startFit() {
       if (third !== undefined && S.job === job) {
         const kept = out;
         const share3 = (100 * third.unexplained).toFixed(2);
+        showProvisional(kept, `Provisional: the model kept from the first two attempts, shown while a third runs (it left ${share3} % of the points unexplained). Cancel to keep it.`);
         buildStages(!!gtOk);
         S.chart.clear('Step 1 loss');
-        $('fit-status').innerHTML = `The model kept left ${share3} % of the points unexplained: fitting a third time, with the Gaussians placed on the last frame. ${trying}`;
+        $('fit-status').innerHTML = `The model kept left ${share3} % of the points unexplained: fitting a third time, with the Gaussians placed on the last frame; that model is on view meanwhile, and Cancel keeps it. ${trying}`;
         let res3 = null;
         try {
           res3 = await attempt({ ...opts, from_last_frame: true });
@@ -758,7 +776,8 @@ async function startFit() {
 }
 
 function showSnapshot(m, snap) {
-  if (!S.view || !S.working || S.working.m !== m) return;
+  // A provisional model (an earlier attempt's) is on view: the next attempt's Gaussians stay off it.
+  if (!S.view || !S.working || S.working.m !== m || S.model) return;
   const pts = S.working.frames[snap.frame];
   if (!pts || pts.length / 3 !== snap.labels.length) return;
   S.view.setPoints(pts, snap.labels);
@@ -803,11 +822,14 @@ function openResult(text, source, how, extra = {}) {
   if (!model.has_tree()) {
     toast('This result has no kinematic tree (the fit stopped after Step 1): segmentation only.', '', 6000);
   }
+  S.resultExtra = extra;
   renderResult(extra);
   showFrame(Math.min(S.current, model.frames() - 1), { frameBox: how !== 'fit' });
   if (how !== 'fit') applyHashCamera();
-  setStepActive('step-explore');
-  $('step-explore').scrollIntoView({ block: 'start', behavior: 'smooth' });
+  if (!extra.provisional) {
+    setStepActive('step-explore');
+    $('step-explore').scrollIntoView({ block: 'start', behavior: 'smooth' });
+  }
   return true;
 }
 
@@ -822,6 +844,7 @@ function renderResult(extra = {}) {
   if (joints.length) bits.push([nR ? `${nR} revolute` : '', nP ? `${nP} prismatic` : ''].filter(Boolean).join(', '));
   bits.push(`${m.frames()} frames`);
   let html = bits.join(' · ');
+  if (extra.provisional) html = `<span class="msg-warn" id="provisional">${escapeHtml(extra.provisional)}</span><br>${html}`;
   const info = m.info();
   const notes = [];
   if (extra.best) notes.push(`chosen m = ${extra.best.m} Gaussians`);
