@@ -285,7 +285,6 @@ fn a_poorly_explained_balanced_fit_is_done_again_from_another_seed() {
             out.to_str().unwrap(),
             "--parts",
             "3..4",
-            "--quiet",
         ]);
         assert!(ok, "{err}");
         assert_eq!(
@@ -293,6 +292,16 @@ fn a_poorly_explained_balanced_fit_is_done_again_from_another_seed() {
             kind == "cabinet",
             "{err}"
         );
+        // The progress bar says when the whole fit starts again, once per attempt.
+        for n in [2, 3] {
+            assert_eq!(
+                err.matches(&format!("attempt {n}: the model so far leaves much"))
+                    .count(),
+                usize::from(kind == "cabinet"),
+                "{err}"
+            );
+        }
+        assert!(!err.contains("attempt 4:"), "{err}");
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap()
     };
     let cabinet = fit("cabinet");

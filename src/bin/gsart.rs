@@ -349,15 +349,25 @@ mod cli {
         GroundTruth::from_json(&read_text(p)?, &p.display().to_string())
     }
 
+    /// "1 joint", "2 joints".
+    fn count(n: usize, what: &str) -> String {
+        format!("{n} {what}{}", if n == 1 { "" } else { "s" })
+    }
+
     fn read_result(p: &Path) -> Result<FitResult> {
         FitResult::from_json(&read_text(p)?, &p.display().to_string())
     }
 
-    /// A one-line terminal progress bar (stderr), redrawn at most ~10 times a second.
+    /// A one-line terminal progress bar (stderr), redrawn at most ~10 times a second,
+    /// with a line of its own when the pipeline starts the whole fit again.
     struct Bar {
         quiet: bool,
         last: Option<Instant>,
         start: Instant,
+        /// The attempt running (`pipeline::fit` may fit again: a second attempt, a third).
+        attempt: usize,
+        /// Steps 2–3 have reported since Step 1 last did.
+        finishing: bool,
     }
 
     impl Bar {
@@ -366,11 +376,27 @@ mod cli {
                 quiet,
                 last: None,
                 start: Instant::now(),
+                attempt: 1,
+                finishing: false,
             }
         }
         fn show(&mut self, p: &Progress) {
             if self.quiet {
                 return;
+            }
+            // Step 1 after Steps 2–3 is only ever a new attempt of the whole fit.
+            let step1 = matches!(p.stage, Stage::Init | Stage::Gaussians);
+            if step1 && self.finishing {
+                self.attempt += 1;
+                eprintln!(
+                    "\r\x1b[Kattempt {}: the model so far leaves much of the clouds unexplained, so the whole fit is done again (the notes at the end say which attempt is kept)",
+                    self.attempt
+                );
+            }
+            if step1 {
+                self.finishing = false;
+            } else if matches!(p.stage, Stage::Tree | Stage::Joints) {
+                self.finishing = true;
             }
             let now = Instant::now();
             let done = p.stage == Stage::Done;
@@ -440,11 +466,12 @@ mod cli {
         }
         let result = &output.result;
         write_text(out, &result.to_json())?;
+        let joints = result.joints.as_ref().map_or(0, |j| j.len());
         eprintln!(
-            "wrote {} ({} parts, {} joints) in {:.1} s",
+            "wrote {} ({}, {}) in {:.1} s",
             out.display(),
-            result.parts,
-            result.joints.as_ref().map_or(0, |j| j.len()),
+            count(result.parts, "part"),
+            count(joints, "joint"),
             t0.elapsed().as_secs_f64()
         );
         if let Some(dir) = ply_out {
