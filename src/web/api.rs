@@ -234,6 +234,13 @@ pub fn fit_candidate(
     Ok(o.into())
 }
 
+/// The error for a candidate this worker does not hold (a page bug, not user input).
+fn not_in_worker(m: usize) -> JsError {
+    JsError::new(&format!(
+        "internal: candidate m = {m} is not in this worker"
+    ))
+}
+
 /// A copy of Step-1 candidate `m` held by this worker, as bytes
 /// (`fit::candidate_bytes`), so another worker can finish it beside this one's; this
 /// worker keeps its own.
@@ -246,11 +253,7 @@ pub fn candidate_bytes(m: usize) -> Result<Vec<u8>, JsError> {
                 .find(|r| r.m == m)
                 .map(crate::fit::candidate_bytes::to_bytes)
         })
-        .ok_or_else(|| {
-            JsError::new(&format!(
-                "internal: candidate m = {m} is not in this worker"
-            ))
-        })
+        .ok_or_else(|| not_in_worker(m))
 }
 
 /// Keeps a candidate another worker sent (`candidate_bytes`), to finish here;
@@ -286,11 +289,7 @@ pub fn finish(
             let i = c.iter().position(|r| r.m == m)?;
             Some(c.swap_remove(i))
         })
-        .ok_or_else(|| {
-            JsError::new(&format!(
-                "internal: candidate m = {m} is not in this worker"
-            ))
-        })?;
+        .ok_or_else(|| not_in_worker(m))?;
     let mut all = Vec::new();
     for pair in candidates.iter() {
         let pair = Array::from(&pair);

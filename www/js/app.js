@@ -686,9 +686,9 @@ async function startFit() {
   // A fit done again (a model that leaves much unexplained) shows the model it has so
   // far while the next attempt runs: it can be explored and exported, and a cancel keeps
   // it as the result.
+  const keptCandidate = (o) => o.candidates.find((c) => c.m === o.best) ?? null;
   const showProvisional = (o, note) => {
-    const best = o.candidates.find((c) => c.m === o.best) ?? null;
-    openResult(o.result, S.seqName, 'fit', { best, metrics: o.metrics, metricsError: o.metricsError, provisional: note });
+    openResult(o.result, S.seqName, 'fit', { best: keptCandidate(o), metrics: o.metrics, metricsError: o.metricsError, provisional: note });
   };
   const t0 = performance.now();
   S.movedRunners = [];
@@ -763,7 +763,7 @@ async function startFit() {
   fitUi(false);
   for (const st of STAGES) if (S.stageEls[st.key]) setStage(st.key, 1);
   const secs = (performance.now() - t0) / 1000;
-  const best = out.candidates.find((c) => c.m === out.best) ?? null;
+  const best = keptCandidate(out);
   // Where the time went: each candidate's Step 1 in its worker, then Steps 2–3.
   const sec1 = (ms) => `${(ms / 1000).toFixed(1)} s`;
   const perCand = out.candidates.map((c) => `${c.m} (${sec1(c.ms)})`).join(', ');

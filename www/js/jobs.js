@@ -104,7 +104,6 @@ export class FitJob {
     this.cb = callbacks;
     this.lanes = [];
     this.cancelled = false;
-    this.movedRunner = false; // whether the runner-up was copied to finish beside the best
     this.parallel = Math.min(maxParallel(), this.ms.length);
   }
 
@@ -166,12 +165,13 @@ export class FitJob {
       const keep = new Set([owner.get(best), runner === null ? null : owner.get(runner), spare]);
       const t0 = performance.now();
       for (const l of this.lanes) if (!keep.has(l)) l.terminate();
+      let movedRunner = false;
       if (spare) {
         try {
           const { bytes } = await owner.get(runner).run({ type: 'copy', m: runner });
           await spare.run({ type: 'put', bytes }, [bytes.buffer]);
           owner.set(runner, spare);
-          this.movedRunner = true;
+          movedRunner = true;
         } catch (e) {
           // The runner-up then finishes after the best, in the worker that fitted it.
           if (e instanceof CancelledError || this.cancelled) throw e;
@@ -209,7 +209,7 @@ export class FitJob {
       }
       return {
         result: r.result, metrics: r.metrics, metricsError: r.metricsError,
-        candidates: done, best: kept, finishMs: performance.now() - t0, movedRunner: this.movedRunner,
+        candidates: done, best: kept, finishMs: performance.now() - t0, movedRunner,
       };
     } finally {
       for (const l of this.lanes) l.terminate();
