@@ -1,7 +1,7 @@
 //! The `gsart` binary end to end: `truth` + `eval` on bench-dev (the ground truth
 //! scores perfectly), `fit` + `eval` on an occluded bench-dev robot, `synth` writes a
 //! readable sequence, `articulate` re-poses a result, bad input gives a one-line
-//! error naming the file, a reader closing the output pipe early is no crash, and a
+//! error naming the file, an output that cannot be written fails before the fit, a reader closing the output pipe early is no crash, and a
 //! poorly explained balanced fit is done again from another seed.
 
 use std::path::{Path, PathBuf};
@@ -221,6 +221,39 @@ fn bad_input_is_one_clear_line() {
         "{err}"
     );
     assert!(!Path::new(&out).exists());
+}
+
+#[test]
+fn an_output_that_cannot_be_written_fails_before_the_fit() {
+    // The input folder does not exist either: the outputs are checked first, so a
+    // long fit never ends in a write error.
+    let dir = tmp("unwritable");
+    let ok_out = dir.join("r.json");
+    let missing = dir.join("no_such_folder").join("r.json");
+    let (ok_s, missing_s) = (ok_out.to_str().unwrap(), missing.to_str().unwrap());
+    let dir_s = dir.to_str().unwrap();
+    for (args, flag) in [
+        (vec!["--out", missing_s], "--out"),
+        (vec!["--out", dir_s], "--out"),
+        (vec!["--out", ok_s, "--urdf", missing_s], "--urdf"),
+        (vec!["--out", ok_s, "--report", missing_s], "--report"),
+    ] {
+        let mut all = vec!["fit", "missing_dir_is_not_read"];
+        all.extend(args);
+        let (ok, _, err) = gsart(&all);
+        assert!(!ok);
+        assert!(
+            err.starts_with("gsart: ") && err.contains(flag) && err.lines().count() == 1,
+            "{all:?}: {err}"
+        );
+        assert!(!err.contains("missing_dir_is_not_read"), "{err}");
+        assert!(!ok_out.exists(), "the probe leaves no file behind");
+    }
+    let (ok, _, err) = gsart(&["bench", "--json", missing_s]);
+    assert!(
+        !ok && err.contains("--json") && err.contains("does not exist"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -341,6 +341,38 @@ mod cli {
         std::fs::read_to_string(p).map_err(|e| Error::io(p.display().to_string(), e))
     }
 
+    /// Fails before a long run (a fit, a bench) when its output `p` (given as `flag`)
+    /// cannot be written, instead of after it: a folder that does not exist, a path
+    /// that is a folder, a folder without write permission (probed by creating the
+    /// file and removing it again when it did not exist).
+    fn check_writable(flag: &str, p: &Path) -> Result<()> {
+        let name = p.display().to_string();
+        if p.is_dir() {
+            return Err(Error::input(
+                name,
+                format!("{flag} is a folder; it needs a file name"),
+            ));
+        }
+        if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+            if !dir.is_dir() {
+                return Err(Error::input(
+                    name,
+                    format!("{flag}: the folder {} does not exist", dir.display()),
+                ));
+            }
+        }
+        let existed = p.exists();
+        std::fs::OpenOptions::new()
+            .append(true)
+            .create(true)
+            .open(p)
+            .map_err(|e| Error::io(format!("{name} ({flag})"), e))?;
+        if !existed {
+            let _ = std::fs::remove_file(p);
+        }
+        Ok(())
+    }
+
     fn write_text(p: &Path, text: &str) -> Result<()> {
         std::fs::write(p, text).map_err(|e| Error::io(p.display().to_string(), e))
     }
@@ -449,6 +481,16 @@ mod cli {
         quiet: bool,
     ) -> Result<()> {
         let t0 = Instant::now();
+        check_writable("--out", out)?;
+        for (flag, path) in [("--urdf", urdf), ("--report", report)] {
+            if let Some(p) = path {
+                check_writable(flag, p)?;
+            }
+        }
+        if let Some(dir) = ply_out {
+            std::fs::create_dir_all(dir)
+                .map_err(|e| Error::io(format!("{} (--ply-out)", dir.display()), e))?;
+        }
         let (seq, gt) = load(input)?;
         let bar = std::sync::Mutex::new(Bar::new(quiet));
         let cb = |p: &Progress| {
@@ -475,7 +517,6 @@ mod cli {
             t0.elapsed().as_secs_f64()
         );
         if let Some(dir) = ply_out {
-            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir.display().to_string(), e))?;
             for (k, frame) in seq.frames.iter().enumerate() {
                 let stem = Path::new(&frame.name)
                     .file_stem()
@@ -629,6 +670,9 @@ mod cli {
         opts: &FitOptions,
         json: Option<&Path>,
     ) -> Result<()> {
+        if let Some(p) = json {
+            check_writable("--json", p)?;
+        }
         let report = gsart::bench::run(workloads, seqs, opts)?;
         print_out(&report.table())?;
         if let Some(p) = json {
