@@ -1,8 +1,9 @@
 //! The `gsart` binary end to end: `truth` + `eval` on bench-dev (the ground truth
 //! scores perfectly), `fit` + `eval` on an occluded bench-dev robot, `synth` writes a
 //! readable sequence, `articulate` re-poses a result, bad input gives a one-line
-//! error naming the file, an output that cannot be written fails before the fit, a reader closing the output pipe early is no crash, and a
-//! poorly explained balanced fit is done again from another seed.
+//! error naming the file, an output that cannot be written fails before the fit, a
+//! reader closing the output pipe early is no crash, and a poorly explained balanced
+//! fit is done again from another seed.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -232,11 +233,15 @@ fn an_output_that_cannot_be_written_fails_before_the_fit() {
     let missing = dir.join("no_such_folder").join("r.json");
     let (ok_s, missing_s) = (ok_out.to_str().unwrap(), missing.to_str().unwrap());
     let dir_s = dir.to_str().unwrap();
+    let file = dir.join("a_file");
+    std::fs::write(&file, b"not a folder").unwrap();
+    let file_s = file.to_str().unwrap();
     for (args, flag) in [
         (vec!["--out", missing_s], "--out"),
         (vec!["--out", dir_s], "--out"),
         (vec!["--out", ok_s, "--urdf", missing_s], "--urdf"),
         (vec!["--out", ok_s, "--report", missing_s], "--report"),
+        (vec!["--out", ok_s, "--ply-out", file_s], "--ply-out"),
     ] {
         let mut all = vec!["fit", "missing_dir_is_not_read"];
         all.extend(args);
