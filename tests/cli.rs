@@ -340,6 +340,13 @@ fn a_poorly_explained_balanced_fit_is_done_again_from_another_seed() {
             );
         }
         assert!(!err.contains("attempt 4:"), "{err}");
+        // The bar follows Step 1 over both part counts, to the end of every attempt's.
+        let attempts = if kind == "cabinet" { 3 } else { 1 };
+        assert!(err.contains("0/2 part counts done, m = 3"), "{err}");
+        assert!(
+            err.matches("2/2 part counts done").count() >= attempts,
+            "{err}"
+        );
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap()
     };
     let cabinet = fit("cabinet");

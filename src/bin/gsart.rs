@@ -390,6 +390,109 @@ mod cli {
         FitResult::from_json(&read_text(p)?, &p.display().to_string())
     }
 
+    /// Step 1's progress over all its candidates (part counts fitted side by side on
+    /// the threads): how far each has got, so the bar shows the whole of Step 1 rather
+    /// than whichever candidate reported last.
+    #[derive(Default)]
+    struct Step1Progress {
+        /// The part counts to fit (more join if model selection adds one).
+        ms: Vec<usize>,
+        /// Per part count that has reported: how far it has got.
+        cands: std::collections::BTreeMap<usize, Candidate>,
+        /// Share of a candidate's time spent before its main loop (warm-up and pose
+        /// search), taken from the first candidate to finish; a half until then. It
+        /// depends on the preset and the input (about 0.7 on bench-dev, balanced).
+        init_share: Option<f64>,
+    }
+
+    /// Share of the warm-up in the time before a candidate's main loop (the rest is the
+    /// pose search).
+    const WARMUP_SHARE: f64 = 0.1;
+
+    /// One candidate's progress: the warm-up and pose search (`init`), then the main
+    /// loop (`main`), each a fraction that never decreases; when it started and when
+    /// its main loop started, to learn `Step1Progress::init_share`.
+    struct Candidate {
+        init: f64,
+        main: f64,
+        started: Instant,
+        main_started: Option<Instant>,
+    }
+
+    impl Step1Progress {
+        fn new(ms: Vec<usize>) -> Self {
+            Step1Progress {
+                ms,
+                ..Default::default()
+            }
+        }
+
+        /// Records a Step-1 report `p` of candidate `m` at `now`; whether it finished
+        /// that candidate (the bar then redraws whatever its rate).
+        fn update(&mut self, m: usize, p: &Progress, now: Instant) -> bool {
+            if !self.ms.contains(&m) {
+                self.ms.push(m);
+            }
+            let f = (p.iter + 1).min(p.total) as f64 / p.total.max(1) as f64;
+            // Before the main loop: the warm-up reports its losses, the pose search
+            // that follows (most of the time) reports none.
+            let f = match (p.stage, p.losses.is_empty()) {
+                (Stage::Init, false) => WARMUP_SHARE * f,
+                (Stage::Init, true) => WARMUP_SHARE + (1.0 - WARMUP_SHARE) * f,
+                _ => f,
+            };
+            let c = self.cands.entry(m).or_insert(Candidate {
+                init: 0.0,
+                main: 0.0,
+                started: now,
+                main_started: None,
+            });
+            if p.stage == Stage::Init {
+                c.init = c.init.max(f);
+                return false;
+            }
+            c.init = 1.0;
+            let was_done = c.main >= 1.0;
+            c.main = c.main.max(f);
+            let main_started = *c.main_started.get_or_insert(now);
+            if c.main >= 1.0 && self.init_share.is_none() {
+                let whole = now.duration_since(c.started).as_secs_f64();
+                let init = main_started.duration_since(c.started).as_secs_f64();
+                if whole > 0.0 {
+                    self.init_share = Some(init / whole);
+                }
+            }
+            c.main >= 1.0 && !was_done
+        }
+
+        /// Fraction of Step 1 done over every candidate.
+        fn fraction(&self) -> f64 {
+            let share = self.init_share.unwrap_or(0.5);
+            let sum: f64 = self
+                .cands
+                .values()
+                .map(|c| share * c.init + (1.0 - share) * c.main)
+                .sum();
+            sum / self.ms.len().max(1) as f64
+        }
+
+        /// "2/6 part counts done, m = 12, 13 running".
+        fn summary(&self) -> String {
+            let finished = self.cands.values().filter(|c| c.main >= 1.0).count();
+            let running: Vec<String> = self
+                .cands
+                .iter()
+                .filter(|(_, c)| c.main < 1.0)
+                .map(|(m, _)| m.to_string())
+                .collect();
+            let mut s = format!("{finished}/{} part counts done", self.ms.len());
+            if !running.is_empty() {
+                s += &format!(", m = {} running", running.join(", "));
+            }
+            s
+        }
+    }
+
     /// A one-line terminal progress bar (stderr), redrawn at most ~10 times a second,
     /// with a line of its own when the pipeline starts the whole fit again.
     struct Bar {
@@ -400,16 +503,19 @@ mod cli {
         attempt: usize,
         /// Steps 2–3 have reported since Step 1 last did.
         finishing: bool,
+        /// The part counts Step 1 fits, and how far each has got in this attempt.
+        step1: Step1Progress,
     }
 
     impl Bar {
-        fn new(quiet: bool) -> Self {
+        fn new(quiet: bool, ms: Vec<usize>) -> Self {
             Bar {
                 quiet,
                 last: None,
                 start: Instant::now(),
                 attempt: 1,
                 finishing: false,
+                step1: Step1Progress::new(ms),
             }
         }
         fn show(&mut self, p: &Progress) {
@@ -420,6 +526,7 @@ mod cli {
             let step1 = matches!(p.stage, Stage::Init | Stage::Gaussians);
             if step1 && self.finishing {
                 self.attempt += 1;
+                self.step1 = Step1Progress::new(std::mem::take(&mut self.step1.ms));
                 eprintln!(
                     "\r\x1b[Kattempt {}: the model so far leaves much of the clouds unexplained, so the whole fit is done again (the notes at the end say which attempt is kept)",
                     self.attempt
@@ -431,8 +538,13 @@ mod cli {
                 self.finishing = true;
             }
             let now = Instant::now();
+            let finished = match (step1, p.m) {
+                (true, Some(m)) => self.step1.update(m, p, now),
+                _ => false,
+            };
             let done = p.stage == Stage::Done;
             if !done
+                && !finished
                 && self
                     .last
                     .is_some_and(|t| now.duration_since(t).as_millis() < 100)
@@ -440,35 +552,55 @@ mod cli {
                 return;
             }
             self.last = Some(now);
-            let frac = if p.total > 0 {
-                p.iter as f64 / p.total as f64
-            } else {
-                0.0
-            };
-            let width = 30;
-            let filled = ((frac * width as f64) as usize).min(width);
             let losses: Vec<String> = p
                 .losses
                 .iter()
                 .take(3)
                 .map(|(k, v)| format!("{k} {v:.4}"))
                 .collect();
-            let m = p.m.map(|m| format!(" m={m}")).unwrap_or_default();
-            eprint!(
-                "\r\x1b[K{:>9}{m} [{}{}] {:>5}/{:<5} {:>6.1}s  {}",
-                format!("{:?}", p.stage).to_lowercase(),
-                "#".repeat(filled),
-                "-".repeat(width - filled),
-                p.iter,
-                p.total,
-                self.start.elapsed().as_secs_f64(),
-                losses.join("  ")
-            );
+            let elapsed = self.start.elapsed().as_secs_f64();
+            let line = if let (true, Some(m)) = (step1, p.m) {
+                // The whole of Step 1; the losses are those of the candidate that
+                // reported last.
+                let losses = if losses.is_empty() {
+                    String::new()
+                } else {
+                    format!("  m={m}: {}", losses.join("  "))
+                };
+                format!(
+                    "{:>9} {}  {}  {elapsed:>6.1}s{losses}",
+                    "step 1",
+                    bar_of(self.step1.fraction()),
+                    self.step1.summary()
+                )
+            } else {
+                let frac = if p.total > 0 {
+                    p.iter as f64 / p.total as f64
+                } else {
+                    0.0
+                };
+                format!(
+                    "{:>9} {} {:>5}/{:<5} {elapsed:>6.1}s  {}",
+                    format!("{:?}", p.stage).to_lowercase(),
+                    bar_of(frac),
+                    p.iter,
+                    p.total,
+                    losses.join("  ")
+                )
+            };
+            eprint!("\r\x1b[K{line}");
             if done {
                 eprintln!();
             }
             let _ = std::io::stderr().flush();
         }
+    }
+
+    /// `[#####-----]`, 30 wide.
+    fn bar_of(frac: f64) -> String {
+        let width = 30;
+        let filled = ((frac.clamp(0.0, 1.0) * width as f64) as usize).min(width);
+        format!("[{}{}]", "#".repeat(filled), "-".repeat(width - filled))
     }
 
     fn fit(
@@ -492,7 +624,9 @@ mod cli {
                 .map_err(|e| Error::io(format!("{} (--ply-out)", dir.display()), e))?;
         }
         let (seq, gt) = load(input)?;
-        let bar = std::sync::Mutex::new(Bar::new(quiet));
+        // The part counts Step 1 will fit, for the bar (the fit reports any error).
+        let ms = gsart::fit::select::candidates(&seq, opts).unwrap_or_default();
+        let bar = std::sync::Mutex::new(Bar::new(quiet, ms));
         let cb = |p: &Progress| {
             if let Ok(mut b) = bar.lock() {
                 b.show(p);
@@ -702,6 +836,71 @@ mod cli {
             print_out(&line)?;
         }
         Ok(())
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::*;
+        use std::time::Duration;
+
+        fn report(stage: Stage, iter: usize, total: usize, warmup: bool) -> Progress {
+            Progress {
+                stage,
+                m: None,
+                iter,
+                total,
+                losses: if warmup {
+                    vec![("mle".into(), -1.0)]
+                } else {
+                    Vec::new()
+                },
+                snapshot: None,
+            }
+        }
+
+        #[test]
+        fn step1_progress_covers_every_part_count() {
+            let t0 = Instant::now();
+            let at = |s: u64| t0 + Duration::from_secs(s);
+            let mut p = Step1Progress::new(vec![10, 11]);
+            assert_eq!(p.fraction(), 0.0);
+            assert_eq!(p.summary(), "0/2 part counts done");
+            // m = 10: warm-up, pose search, then its main loop; nothing finishes before
+            // the main loop's last report.
+            assert!(!p.update(10, &report(Stage::Init, 59, 60, true), at(0)));
+            let after_warmup = p.fraction();
+            assert!((after_warmup - 0.5 * WARMUP_SHARE / 2.0).abs() < 1e-12);
+            assert!(!p.update(10, &report(Stage::Init, 9, 20, false), at(3)));
+            // The search starts at 0 after the warm-up ended at 1: never backwards.
+            assert!(p.fraction() > after_warmup);
+            assert!(!p.update(10, &report(Stage::Gaussians, 0, 100, false), at(6)));
+            assert_eq!(p.summary(), "0/2 part counts done, m = 10 running");
+            assert!(p.update(10, &report(Stage::Gaussians, 99, 100, false), at(8)));
+            assert!(!p.update(10, &report(Stage::Gaussians, 99, 100, false), at(8)));
+            // The first candidate to finish spent 6 of its 8 s before its main loop.
+            assert_eq!(p.init_share, Some(0.75));
+            assert_eq!(p.fraction(), 0.5);
+            assert_eq!(p.summary(), "1/2 part counts done");
+            // A part count model selection adds joins the list.
+            p.update(20, &report(Stage::Gaussians, 49, 100, false), at(9));
+            assert_eq!(p.summary(), "1/3 part counts done, m = 20 running");
+            let f = p.fraction();
+            assert!((f - (1.0 + 0.75 + 0.25 * 0.5) / 3.0).abs() < 1e-12, "{f}");
+            p.update(11, &report(Stage::Gaussians, 99, 100, false), at(10));
+            p.update(20, &report(Stage::Gaussians, 99, 100, false), at(11));
+            assert_eq!(p.fraction(), 1.0);
+            assert_eq!(p.summary(), "3/3 part counts done");
+        }
+
+        #[test]
+        fn the_bar_is_clamped() {
+            assert_eq!(bar_of(-1.0), format!("[{}]", "-".repeat(30)));
+            assert_eq!(
+                bar_of(0.5),
+                format!("[{}{}]", "#".repeat(15), "-".repeat(15))
+            );
+            assert_eq!(bar_of(2.0), format!("[{}]", "#".repeat(30)));
+        }
     }
 }
 
