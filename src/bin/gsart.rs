@@ -493,6 +493,33 @@ mod cli {
         }
     }
 
+    /// How many passes the tree and the joint refinement of Steps 2–3 have begun: they
+    /// run again for the runner-up, the symmetry repair and the joint sweeps, each from
+    /// iteration 0, so the bar names the pass instead of seeming to go back.
+    #[derive(Default)]
+    struct Passes {
+        /// The last report of either stage: (stage, iteration).
+        last: Option<(Stage, usize)>,
+        tree: usize,
+        joints: usize,
+    }
+
+    impl Passes {
+        /// Records report `p`; the pass of its stage it belongs to (0 for other stages).
+        fn update(&mut self, p: &Progress) -> usize {
+            let n = match p.stage {
+                Stage::Tree => &mut self.tree,
+                Stage::Joints => &mut self.joints,
+                _ => return 0,
+            };
+            if !matches!(self.last, Some((s, i)) if s == p.stage && p.iter >= i) {
+                *n += 1;
+            }
+            self.last = Some((p.stage, p.iter));
+            *n
+        }
+    }
+
     /// A one-line terminal progress bar (stderr), redrawn at most ~10 times a second,
     /// with a line of its own when the pipeline starts the whole fit again.
     struct Bar {
@@ -505,6 +532,8 @@ mod cli {
         finishing: bool,
         /// The part counts Step 1 fits, and how far each has got in this attempt.
         step1: Step1Progress,
+        /// Passes of Steps 2–3's stages in this attempt.
+        passes: Passes,
     }
 
     impl Bar {
@@ -516,6 +545,7 @@ mod cli {
                 attempt: 1,
                 finishing: false,
                 step1: Step1Progress::new(ms),
+                passes: Passes::default(),
             }
         }
         fn show(&mut self, p: &Progress) {
@@ -534,9 +564,11 @@ mod cli {
             }
             if step1 {
                 self.finishing = false;
+                self.passes = Passes::default();
             } else if matches!(p.stage, Stage::Tree | Stage::Joints) {
                 self.finishing = true;
             }
+            let pass = self.passes.update(p);
             let now = Instant::now();
             let finished = match (step1, p.m) {
                 (true, Some(m)) => self.step1.update(m, p, now),
@@ -568,7 +600,7 @@ mod cli {
                     format!("  m={m}: {}", losses.join("  "))
                 };
                 format!(
-                    "{:>9} {}  {}  {elapsed:>6.1}s{losses}",
+                    "{:>11} {}  {}  {elapsed:>6.1}s{losses}",
                     "step 1",
                     bar_of(self.step1.fraction()),
                     self.step1.summary()
@@ -579,9 +611,14 @@ mod cli {
                 } else {
                     0.0
                 };
+                let name = format!("{:?}", p.stage).to_lowercase();
+                let name = if pass > 1 {
+                    format!("{name} ({pass})")
+                } else {
+                    name
+                };
                 format!(
-                    "{:>9} {} {:>5}/{:<5} {elapsed:>6.1}s  {}",
-                    format!("{:?}", p.stage).to_lowercase(),
+                    "{name:>11} {} {:>5}/{:<5} {elapsed:>6.1}s  {}",
                     bar_of(frac),
                     p.iter,
                     p.total,
@@ -890,6 +927,30 @@ mod cli {
             p.update(20, &report(Stage::Gaussians, 99, 100, false), at(11));
             assert_eq!(p.fraction(), 1.0);
             assert_eq!(p.summary(), "3/3 part counts done");
+        }
+
+        #[test]
+        fn passes_count_each_stage_from_its_start() {
+            let mut p = Passes::default();
+            let seq = [
+                (Stage::Tree, 0, 1),
+                (Stage::Tree, 2, 1),
+                (Stage::Joints, 0, 1),
+                (Stage::Joints, 150, 1),
+                (Stage::Tree, 2, 2), // the runner-up's tree, reported from its end
+                (Stage::Joints, 25, 2),
+                (Stage::Joints, 199, 2),
+                (Stage::Joints, 0, 3), // a sweep's refinement
+                (Stage::Done, 0, 0),
+                (Stage::Joints, 50, 3), // a pass goes on past another stage's report
+            ];
+            for (stage, iter, want) in seq {
+                assert_eq!(
+                    p.update(&report(stage, iter, 200, false)),
+                    want,
+                    "{stage:?} {iter}"
+                );
+            }
         }
 
         #[test]
