@@ -557,6 +557,7 @@ mod cli {
             if step1 && self.finishing {
                 self.attempt += 1;
                 self.step1 = Step1Progress::new(std::mem::take(&mut self.step1.ms));
+                self.passes = Passes::default();
                 eprintln!(
                     "\r\x1b[Kattempt {}: the model so far leaves much of the clouds unexplained, so the whole fit is done again (the notes at the end say which attempt is kept)",
                     self.attempt
@@ -564,16 +565,14 @@ mod cli {
             }
             if step1 {
                 self.finishing = false;
-                self.passes = Passes::default();
             } else if matches!(p.stage, Stage::Tree | Stage::Joints) {
                 self.finishing = true;
             }
             let pass = self.passes.update(p);
             let now = Instant::now();
-            let finished = match (step1, p.m) {
-                (true, Some(m)) => self.step1.update(m, p, now),
-                _ => false,
-            };
+            // The candidate a Step-1 report is about.
+            let cand = p.m.filter(|_| step1);
+            let finished = cand.is_some_and(|m| self.step1.update(m, p, now));
             let done = p.stage == Stage::Done;
             if !done
                 && !finished
@@ -591,7 +590,7 @@ mod cli {
                 .map(|(k, v)| format!("{k} {v:.4}"))
                 .collect();
             let elapsed = self.start.elapsed().as_secs_f64();
-            let line = if let (true, Some(m)) = (step1, p.m) {
+            let line = if let Some(m) = cand {
                 // The whole of Step 1; the losses are those of the candidate that
                 // reported last.
                 let losses = if losses.is_empty() {
