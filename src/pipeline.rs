@@ -504,17 +504,31 @@ fn keep_after_third(kept: FitOutput, third: FitOutput) -> FitOutput {
     let Some(look) = third_look(&kept.result, &third.result) else {
         return kept;
     };
-    let (mut out, other) = if look.take_second {
+    let (mut out, other) = apply_third_look(kept, third, &look, |o| &mut o.result);
+    if look.take_second {
+        out.notes.extend(retry_note(&other.result));
+    }
+    out.notes.push(look.note);
+    out
+}
+
+/// The two attempts after the third look: `(kept, other)`, the kept one's result with
+/// the look recorded (`record_third`). The CLI's `fit` holds the attempts as
+/// `FitOutput`s and the page's `third_look` as bare results, so `result` reaches the
+/// result inside `T`.
+pub fn apply_third_look<T>(
+    kept: T,
+    third: T,
+    look: &RetryLook,
+    result: impl Fn(&mut T) -> &mut crate::io::result::FitResult,
+) -> (T, T) {
+    let (mut out, mut other) = if look.take_second {
         (third, kept)
     } else {
         (kept, third)
     };
-    if look.take_second {
-        out.notes.extend(retry_note(&other.result));
-    }
-    record_third(&mut out.result, &look, &other.result);
-    out.notes.push(look.note);
-    out
+    record_third(result(&mut out), look, result(&mut other));
+    (out, other)
 }
 
 /// The note a second attempt left in a result's info, if any.
@@ -530,7 +544,7 @@ fn retry_note(result: &crate::io::result::FitResult) -> Option<String> {
 /// Writes a third attempt's look into the kept result's info (`third`, and its note).
 /// When the third attempt was taken, `earlier` is the attempt kept before it, whose
 /// record of the second attempt (`retry`, and its note) the result keeps too.
-pub fn record_third(
+fn record_third(
     result: &mut crate::io::result::FitResult,
     look: &RetryLook,
     earlier: &crate::io::result::FitResult,
@@ -1207,8 +1221,12 @@ mod tests {
         );
         let look = third_look(&kept, &clear).expect("look");
         assert!(look.take_second && look.info["taken"] == "third");
-        let mut out = clear.clone();
-        record_third(&mut out, &look, &kept);
+        let (out, other) = apply_third_look(kept.clone(), clear.clone(), &look, |r| r);
+        assert_eq!(
+            other.to_json(),
+            kept.to_json(),
+            "the earlier attempt is unchanged"
+        );
         let info = out.info.as_ref().expect("info");
         assert_eq!(info["retry"], kept.info.as_ref().expect("info")["retry"]);
         assert_eq!(info["third"]["taken"], "third");

@@ -407,12 +407,7 @@ pub fn third_look(kept_json: &str, third_json: &str) -> Result<JsValue, JsError>
         set(&o, "result", &JsValue::from_str(kept_json));
         return Ok(o.into());
     };
-    let (mut out, other) = if look.take_second {
-        (third, kept)
-    } else {
-        (kept, third)
-    };
-    crate::pipeline::record_third(&mut out, &look, &other);
+    let (out, _) = crate::pipeline::apply_third_look(kept, third, &look, |r| r);
     set(&o, "third", &JsValue::from_bool(look.take_second));
     set(&o, "result", &JsValue::from_str(&out.to_json()));
     Ok(o.into())
