@@ -1228,6 +1228,7 @@ mod tests {
             "the earlier attempt is unchanged"
         );
         let info = out.info.as_ref().expect("info");
+        assert_eq!(info["m"], 14, "the third attempt's model is the one kept");
         assert_eq!(info["retry"], kept.info.as_ref().expect("info")["retry"]);
         assert_eq!(info["third"]["taken"], "third");
         let notes: Vec<&str> = info["notes"]
