@@ -46,9 +46,9 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
     const c = window.gsart.state.chart;
     const add = c.add.bind(c);
     window.plotted = [];
-    c.add = (key, label, x, y) => {
-      if (Number.isFinite(y)) window.plotted.push([key, y]);
-      add(key, label, x, y);
+    c.add = (key, label, x, y, o) => {
+      if (Number.isFinite(y)) window.plotted.push([key, y, x, c.title]);
+      add(key, label, x, y, o);
     };
   });
   await page.locator('#btn-fit').click();
@@ -87,9 +87,20 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   // (once reported as 0) are not plotted.
   const plotted = await page.evaluate(() => window.plotted);
   const keys = new Set(plotted.map(([k]) => k));
-  assert.ok(keys.has('m2') && keys.has('m4') && keys.has('joints'), `chart series: ${[...keys]}`);
+  // Each candidate's Chamfer phase and EMD phase are lines of their own (the two losses
+  // differ in scale), and so is each pass of Step 3's refinement.
+  for (const k of ['m2', 'm2:emd', 'm4', 'm4:emd', 'joints1']) {
+    assert.ok(keys.has(k), `chart series ${k} missing: ${[...keys]}`);
+  }
   const bad = plotted.filter(([, y]) => !(y > 0));
   assert.equal(bad.length, 0, `non-positive losses plotted: ${JSON.stringify(bad.slice(0, 5))}`);
+  // No line goes back: within a series (and a chart) the iteration fraction only grows.
+  const lastX = new Map();
+  for (const [k, , x, title] of plotted) {
+    const id = `${title}/${k}`;
+    assert.ok(!(x < lastX.get(id)), `series ${id} goes back: ${x} after ${lastX.get(id)}`);
+    lastX.set(id, x);
+  }
 
   // Results: tree diagram, joints with sliders, metrics (the example has ground truth).
   const nodes = await page.locator('#tree .node').count();

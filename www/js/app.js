@@ -532,15 +532,37 @@ function fitUi(running) {
 // The loss the chart plots: Step 1's transfer loss (the Chamfer until EMD replaces it,
 // then the EMD) and Step 3's refinement loss. Reports without one (the warm-up's L_MLE,
 // which is negative, and L_sep) are not plotted.
-function lossValue(losses) {
-  if (!losses) return NaN;
+// The loss a progress report's curve shows: [term, value] of its first term among the
+// transfer losses (Step 1's Chamfer phase, then its EMD phase) and Step 3's refinement,
+// or [null, NaN] (the warm-up's L_MLE, the pose search's reports without losses).
+function lossTerm(losses) {
+  if (!losses) return [null, NaN];
   const entries = Array.isArray(losses) ? losses : Object.entries(losses);
   for (const p of ['chamfer', 'emd', 'refine']) {
     const e = entries.find(([k]) => k.toLowerCase() === p);
-    if (e) return e[1];
+    if (e) return [p, e[1]];
   }
-  return NaN;
+  return [null, NaN];
 }
+
+// Steps 2–3 run the tree and the joint refinement again (the symmetry repair, the
+// joint sweeps), each from iteration 0: each run is a pass, which the stage row names
+// and the chart draws as its own line, so neither seems to go back (as `gsart fit`'s
+// bar does). A pass begins when the stage changes or its iteration goes back.
+class Passes {
+  constructor() { this.last = null; this.tree = 0; this.joints = 0; }
+  /** Records a report of stage `key` at iteration `iter`; the pass it belongs to (0 for other stages). */
+  update(key, iter) {
+    if (key !== 'tree' && key !== 'joints') return 0;
+    if (!(this.last && this.last[0] === key && iter >= this.last[1])) this[key] += 1;
+    this.last = [key, iter];
+    return this[key];
+  }
+}
+
+// Step 1's curves: a candidate's Chamfer phase solid, its EMD phase dashed in the same
+// colour (the two losses differ in scale, so one line would seem to jump up).
+const STEP1_CHART = ['Step 1: Chamfer', 'EMD'];
 
 async function startFit() {
   const good = goodFrames();
@@ -553,7 +575,7 @@ async function startFit() {
   buildStages(!!gtOk);
   $('progress').hidden = false;
   $('step-fit').scrollIntoView({ block: 'start', behavior: 'smooth' });
-  S.chart.clear('Step 1 loss');
+  S.chart.clear(...STEP1_CHART);
   fitUi(true);
   setStepActive('step-fit');
   // The core decides which part counts a quality tries (fast: the two ends of the
@@ -580,6 +602,7 @@ async function startFit() {
   // from another seed): Step 1's candidates in workers, then Steps 2–3.
   const attempt = async (jobOpts) => {
     const cands = new Map(); // m -> {iter, total, done}
+    const passes = new Passes();
     let totalGuess = 0;
     let nCand = parts.length;
     const step1Progress = () => {
@@ -637,8 +660,11 @@ async function startFit() {
             c.iter = p.iter; c.total = p.total || c.total;
             if (!totalGuess && p.total) totalGuess = p.total;
           }
-          const y = lossValue(p.losses);
-          if (p.total) S.chart.add(`m${m}`, `m=${m}`, p.iter / p.total, y);
+          const [term, y] = lossTerm(p.losses);
+          if (p.total && term) {
+            const emd = term === 'emd';
+            S.chart.add(emd ? `m${m}:emd` : `m${m}`, `m=${m}`, p.iter / p.total, y, { group: `m${m}`, dashed: emd });
+          }
           if (p.snapshot && m === S.focusM) pendingSnap = [m, p.snapshot];
           scheduleUi();
         },
@@ -663,10 +689,15 @@ async function startFit() {
         onFinishProgress: (p) => {
           const key = p.stage === 'done' ? 'joints' : p.stage;
           if (!S.stageEls[key]) return;
-          setStage(key, p.total ? p.iter / p.total : 0);
+          const frac = p.total ? p.iter / p.total : 0;
+          const pass = p.stage === 'done' ? passes.joints : passes.update(key, p.iter);
+          setStage(key, frac, pass > 1 && frac < 1 ? `pass ${pass} · ${Math.round(frac * 100)}%` : '');
+          if (pass > 1) {
+            S.stageEls[key].row.title = 'Steps 2–3 run again after the symmetry repair and the joint sweeps; each run is a pass.';
+          }
           if (key === 'joints' && p.total) {
             if (S.chart.title !== 'Step 3 loss') S.chart.clear('Step 3 loss');
-            S.chart.add('joints', 'joints', p.iter / p.total, lossValue(p.losses));
+            S.chart.add(`joints${pass}`, `pass ${pass}`, frac, lossTerm(p.losses)[1]);
           }
         },
       },
@@ -708,7 +739,7 @@ async function startFit() {
       const share = (100 * retry.unexplained).toFixed(2);
       showProvisional(first, `Provisional: the first attempt's model, shown while a second attempt runs (this one left ${share} % of the points unexplained). Cancel to keep it.`);
       buildStages(!!gtOk);
-      S.chart.clear('Step 1 loss');
+      S.chart.clear(...STEP1_CHART);
       $('fit-status').innerHTML = `The model left ${share} % of the points unexplained: fitting again from seed ${again.seed}; its model is on view meanwhile, and Cancel keeps it. ${trying}`;
       let second = null;
       try {
@@ -732,7 +763,7 @@ async function startFit() {
         const share3 = (100 * third.unexplained).toFixed(2);
         showProvisional(kept, `Provisional: the model kept from the first two attempts, shown while a third runs (it left ${share3} % of the points unexplained). Cancel to keep it.`);
         buildStages(!!gtOk);
-        S.chart.clear('Step 1 loss');
+        S.chart.clear(...STEP1_CHART);
         $('fit-status').innerHTML = `The model kept left ${share3} % of the points unexplained: fitting a third time, with the Gaussians placed on the last frame; that model is on view meanwhile, and Cancel keeps it. ${trying}`;
         let res3 = null;
         try {

@@ -1,5 +1,7 @@
-// Live loss plot on a small 2D canvas: one line per series (a candidate part
-// count, or a refinement stage), log-scaled y, x = iteration fraction.
+// Live loss plot on a small 2D canvas: one line per series, log-scaled y, x =
+// iteration fraction. Series of one group (a candidate part count's Chamfer phase and
+// its EMD phase) share a colour and one legend entry; a dashed series is drawn dashed,
+// and the legend says what dashes stand for.
 
 const MIN_MS = 250;
 const COLORS = ['#4cc9f0', '#f72585', '#ffc15e', '#52d49b', '#b388ff', '#ff8a5b', '#7ee0ff', '#ff9ecd', '#c3f584'];
@@ -7,24 +9,33 @@ const COLORS = ['#4cc9f0', '#f72585', '#ffc15e', '#52d49b', '#b388ff', '#ff8a5b'
 export class LossChart {
   constructor(canvas) {
     this.canvas = canvas;
-    this.series = new Map(); // key -> {label, points: [[x, y]], color}
+    this.series = new Map(); // key -> {label, points: [[x, y]], color, group, dashed}
+    this.colors = new Map(); // group -> colour
     this.title = '';
+    this.dashNote = '';
     this.pending = false;
     new ResizeObserver(() => this.draw()).observe(canvas);
   }
 
-  clear(title = '') {
+  /** Empties the chart; `dashNote` names what a dashed line stands for in the legend. */
+  clear(title = '', dashNote = '') {
     this.series.clear();
+    this.colors.clear();
     this.title = title;
+    this.dashNote = dashNote;
     this.draw();
   }
 
-  /** Adds a point; x in [0, 1] (progress), y > 0 (loss). */
-  add(key, label, x, y) {
+  /**
+   * Adds a point; x in [0, 1] (progress), y > 0 (loss). `group` (default: the key)
+   * picks the colour and the legend entry; `dashed` draws the series dashed.
+   */
+  add(key, label, x, y, { group = key, dashed = false } = {}) {
     if (!Number.isFinite(y)) return;
     let s = this.series.get(key);
     if (!s) {
-      s = { label, points: [], color: COLORS[this.series.size % COLORS.length] };
+      if (!this.colors.has(group)) this.colors.set(group, COLORS[this.colors.size % COLORS.length]);
+      s = { label, points: [], color: this.colors.get(group), group, dashed };
       this.series.set(key, s);
     }
     s.points.push([x, y]);
@@ -78,28 +89,50 @@ export class LossChart {
     g.strokeStyle = '#232a45';
     g.lineWidth = 1;
     g.textAlign = 'right';
-    for (let i = 0; i <= 3; i++) {
+    const ticks = [0, 1, 2, 3].map((i) => {
       const v = a + ((b - a) * i) / 3;
+      return useLog ? 10 ** v : v;
+    });
+    const labels = tickLabels(ticks);
+    ticks.forEach((_, i) => {
       const y = pad.t + ph * (1 - i / 3);
       g.beginPath(); g.moveTo(pad.l, y); g.lineTo(w - pad.r, y); g.stroke();
-      const val = useLog ? 10 ** v : v;
-      g.fillText(fmt(val), pad.l - 4, y);
-    }
+      g.fillText(labels[i], pad.l - 4, y);
+    });
     // lines
     for (const s of this.series.values()) {
       g.strokeStyle = s.color;
       g.lineWidth = 1.5;
+      g.setLineDash(s.dashed ? [4, 3] : []);
       g.beginPath();
       s.points.forEach(([x, y], i) => (i ? g.lineTo(xOf(x), yOf(y)) : g.moveTo(xOf(x), yOf(y))));
       g.stroke();
     }
-    // legend
+    g.setLineDash([]);
+    // legend: one entry per group, then what the dashes stand for
     g.textAlign = 'left';
     let lx = pad.l;
     g.fillStyle = '#8d96b5';
     if (this.title) { g.fillText(this.title, lx, 9); lx += g.measureText(this.title).width + 10; }
+    const entries = [];
+    const seen = new Set();
     for (const s of this.series.values()) {
-      if (lx > w - 30) break;
+      if (!seen.has(s.group)) { seen.add(s.group); entries.push(s); }
+    }
+    // The dashes' note sits at the right end; the groups' entries stop short of it.
+    const note = this.dashNote && [...this.series.values()].some((s) => s.dashed) ? this.dashNote : '';
+    const noteW = note ? g.measureText(note).width + 24 : 0;
+    if (note) {
+      const nx = Math.max(lx, w - pad.r - noteW);
+      g.strokeStyle = '#c5cbe0';
+      g.setLineDash([4, 3]);
+      g.beginPath(); g.moveTo(nx, 9); g.lineTo(nx + 14, 9); g.stroke();
+      g.setLineDash([]);
+      g.fillStyle = '#c5cbe0';
+      g.fillText(note, nx + 18, 9);
+    }
+    for (const s of entries) {
+      if (lx > w - 30 - noteW) break;
       g.fillStyle = s.color;
       g.fillRect(lx, 6, 8, 6);
       g.fillStyle = '#c5cbe0';
@@ -109,11 +142,20 @@ export class LossChart {
   }
 }
 
-function fmt(v) {
+/** Labels for the axis ticks `vs`, with just enough digits that no two read the same. */
+export function tickLabels(vs) {
+  let labels = vs.map((v) => fmt(v, 0));
+  for (let extra = 1; extra <= 3 && new Set(labels).size < labels.length; extra++) {
+    labels = vs.map((v) => fmt(v, extra));
+  }
+  return labels;
+}
+
+function fmt(v, extra) {
   if (v === 0) return '0';
   const a = Math.abs(v);
-  if (a >= 1000 || a < 0.01) return v.toExponential(0);
-  if (a >= 10) return v.toFixed(0);
-  if (a >= 1) return v.toFixed(1);
-  return v.toFixed(2);
+  if (a >= 1000 || a < 0.01) return v.toExponential(extra);
+  if (a >= 10) return v.toFixed(extra);
+  if (a >= 1) return v.toFixed(1 + extra);
+  return v.toFixed(2 + extra);
 }
