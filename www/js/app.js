@@ -529,12 +529,10 @@ function fitUi(running) {
   for (const el of document.querySelectorAll('#step-load button, #step-load input, .chip')) el.disabled = running;
 }
 
-// The loss the chart plots: Step 1's transfer loss (the Chamfer until EMD replaces it,
-// then the EMD) and Step 3's refinement loss. Reports without one (the warm-up's L_MLE,
-// which is negative, and L_sep) are not plotted.
 // The loss a progress report's curve shows: [term, value] of its first term among the
 // transfer losses (Step 1's Chamfer phase, then its EMD phase) and Step 3's refinement,
-// or [null, NaN] (the warm-up's L_MLE, the pose search's reports without losses).
+// or [null, NaN]. Reports without one (the warm-up's L_MLE, which is negative, and
+// L_sep; the pose search's, which carry no losses) are not plotted.
 function lossTerm(losses) {
   if (!losses) return [null, NaN];
   const entries = Array.isArray(losses) ? losses : Object.entries(losses);
