@@ -132,7 +132,7 @@ export class LossChart {
       g.fillText(note, nx + 18, 9);
     }
     for (const s of entries) {
-      if (lx > w - 30 - noteW) break;
+      if (lx + 11 + g.measureText(s.label).width > w - pad.r - noteW) break;
       g.fillStyle = s.color;
       g.fillRect(lx, 6, 8, 6);
       g.fillStyle = '#c5cbe0';
