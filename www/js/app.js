@@ -690,8 +690,9 @@ async function startFit() {
           const frac = p.total ? p.iter / p.total : 0;
           const pass = p.stage === 'done' ? passes.joints : passes.update(key, p.iter);
           setStage(key, frac, pass > 1 && frac < 1 ? `pass ${pass} · ${Math.round(frac * 100)}%` : '');
-          if (pass > 1) {
-            S.stageEls[key].row.title = 'Steps 2–3 run again after the symmetry repair and the joint sweeps; each run is a pass.';
+          const row = S.stageEls[key].row;
+          if (pass > 1 && !row.title) {
+            row.title = 'Steps 2–3 run again after the symmetry repair and the joint sweeps; each run is a pass.';
           }
           if (key === 'joints' && p.total) {
             if (S.chart.title !== 'Step 3 loss') S.chart.clear('Step 3 loss');
