@@ -38,6 +38,9 @@ pub struct BenchRow {
     pub flow_error: Option<f64>,
     pub tree_edit_distance: Option<usize>,
     pub reanimation_error: Option<f64>,
+    /// Ground-truth joints within issue #4's bar (right type, axis ≤ 5°, pivot ≤ 2;
+    /// `eval::joint_error`), and all ground-truth joints.
+    pub joints_within_bar: Option<(usize, usize)>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -54,14 +57,14 @@ impl BenchReport {
     pub fn table(&self) -> String {
         let f = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.3}"));
         let mut s = format!(
-            "quality {}, {} threads, peak memory {}\n\n| run | K×N | m range | m | ms/iter | iters | step 1 s | steps 2–3 s | total s | mean RI | recon | flow | TED | re-anim |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+            "quality {}, {} threads, peak memory {}\n\n| run | K×N | m range | m | ms/iter | iters | step 1 s | steps 2–3 s | total s | mean RI | recon | flow | TED | re-anim | joints in the bar |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
             self.quality,
             self.threads,
             self.peak_memory_mib.map_or("n/a".into(), |m| format!("{m:.0} MiB"))
         );
         for r in &self.rows {
             s += &format!(
-                "| {}{} | {}×{} | {}–{} | {} | {:.2} | {} | {:.1} | {:.1} | {:.1} | {} | {} | {} | {} | {} |\n",
+                "| {}{} | {}×{} | {}–{} | {} | {:.2} | {} | {:.1} | {:.1} | {:.1} | {} | {} | {} | {} | {} | {} |\n",
                 r.name,
                 match r.attempts {
                     2 => " (fitted twice)",
@@ -83,6 +86,8 @@ impl BenchReport {
                 f(r.flow_error),
                 r.tree_edit_distance.map_or("–".into(), |t| t.to_string()),
                 f(r.reanimation_error),
+                r.joints_within_bar
+                    .map_or("–".into(), |(w, n)| format!("{w} of {n}")),
             );
         }
         s
@@ -160,6 +165,10 @@ pub fn run_one(
         flow_error: metrics.as_ref().map(|m| m.flow_error),
         tree_edit_distance: metrics.as_ref().and_then(|m| m.tree_edit_distance),
         reanimation_error: metrics.as_ref().and_then(|m| m.reanimation_error),
+        joints_within_bar: metrics
+            .as_ref()
+            .and_then(|m| m.joints.as_ref())
+            .map(|j| (j.within_bar, j.joints)),
     })
 }
 

@@ -3,7 +3,8 @@
 //! readable sequence, `articulate` re-poses a result, bad input gives a one-line
 //! error naming the file, an output that cannot be written fails before the fit, a
 //! reader closing the output pipe early is no crash, and a poorly explained balanced
-//! fit is done again from another seed.
+//! fit is done again from another seed, and `bench` reports a sequence's metrics and
+//! joints in the bar.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -66,6 +67,9 @@ fn ground_truth_as_result_scores_perfectly_on_bench_dev() {
         );
         assert!(m["flow_error"].as_f64().unwrap() < 1e-9, "{seq}: {m}");
         assert_eq!(m["tree_edit_distance"], 0, "{seq}: {m}");
+        let j = &m["joints"];
+        assert!(j["joints"].as_u64().unwrap() > 0, "{seq}: {m}");
+        assert_eq!(j["within_bar"], j["joints"], "{seq}: {m}");
     }
 }
 
@@ -259,6 +263,56 @@ fn an_output_that_cannot_be_written_fails_before_the_fit() {
         !ok && err.contains("--json") && err.contains("does not exist"),
         "{err}"
     );
+}
+
+/// `gsart bench --seq` on a small synthetic laptop: one table row with the metrics and
+/// the joints in issue #4's bar, and the same row in the JSON report.
+#[test]
+fn bench_reports_a_sequence_with_its_joints_in_the_bar() {
+    let dir = tmp("bench");
+    let seq = dir.join("laptop");
+    let (ok, _, err) = gsart(&[
+        "synth",
+        "laptop",
+        "--out",
+        seq.to_str().unwrap(),
+        "--frames",
+        "4",
+        "--points",
+        "512",
+    ]);
+    assert!(ok, "{err}");
+    let json = dir.join("bench.json");
+    let (ok, table, err) = gsart(&[
+        "bench",
+        "--quality",
+        "fast",
+        "--seq",
+        seq.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let header = table
+        .lines()
+        .find(|l| l.starts_with("| run "))
+        .expect(&table);
+    assert!(
+        header.trim_end().ends_with("| joints in the bar |"),
+        "{table}"
+    );
+    let row = table.lines().find(|l| l.contains("laptop")).expect(&table);
+    let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let rows = report["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 1, "{report}");
+    let bar = &rows[0]["joints_within_bar"];
+    assert_eq!(bar[1], 1, "the laptop has one joint: {report}");
+    let within = bar[0].as_u64().unwrap();
+    assert!(within <= 1, "{report}");
+    assert_eq!(cells[cells.len() - 2], format!("{within} of 1"), "{row}");
+    assert!(rows[0]["mean_ri"].as_f64().unwrap() > 0.5, "{report}");
 }
 
 #[test]

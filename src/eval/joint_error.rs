@@ -51,7 +51,29 @@ pub struct JointErrors {
     pub max_axis_deg: Option<f64>,
     /// Largest pivot error ×100 over the found revolute joints of the right type.
     pub max_pivot_error: Option<f64>,
+    /// Of the found ones, within issue #4's bar (`JointMatch::within_bar`). Absent in
+    /// reports written before it was counted.
+    #[serde(default)]
+    pub within_bar: usize,
     pub per_joint: Vec<JointMatch>,
+}
+
+/// Issue #4's bar for one joint: axis angle at most this many degrees…
+pub const AXIS_BAR_DEG: f64 = 5.0;
+/// …and, for a revolute joint, pivot error (×100 of the object size) at most this.
+pub const PIVOT_BAR: f64 = 2.0;
+
+impl JointMatch {
+    /// Found with the right type, its axis within `AXIS_BAR_DEG` and, if revolute,
+    /// its pivot within `PIVOT_BAR` (a prismatic joint has no pivot).
+    pub fn within_bar(&self) -> bool {
+        self.pred_type == Some(self.gt_type)
+            && self.axis_deg.is_some_and(|a| a <= AXIS_BAR_DEG)
+            && match self.gt_type {
+                JointType::Revolute => self.pivot_error.is_some_and(|p| p <= PIVOT_BAR),
+                JointType::Prismatic => true,
+            }
+    }
 }
 
 /// Joint errors of `result` against `gt`. `points`, `pred` and `gt_labels` are the
@@ -152,6 +174,7 @@ pub fn joint_errors(
             .count(),
         max_axis_deg: max(found.iter().filter_map(|m| m.axis_deg).collect()),
         max_pivot_error: max(found.iter().filter_map(|m| m.pivot_error).collect()),
+        within_bar: per_joint.iter().filter(|m| m.within_bar()).count(),
         per_joint,
     })
 }
@@ -190,7 +213,10 @@ mod tests {
         let pts = out.sequence.frames[c].points.clone();
         let labels = labels[c].clone();
         let e = joint_errors(&r, &gt, &pts, &r.labels[c].clone(), &labels).expect("errors");
-        assert_eq!((e.joints, e.found, e.type_correct), (1, 1, 1));
+        assert_eq!(
+            (e.joints, e.found, e.type_correct, e.within_bar),
+            (1, 1, 1, 1)
+        );
         assert!(e.max_axis_deg.unwrap() < 1e-4, "{e:?}");
         assert!(e.max_pivot_error.unwrap() < 1e-6, "{e:?}");
 
@@ -204,5 +230,29 @@ mod tests {
         assert!((e.max_axis_deg.unwrap() - 10.0).abs() < 1e-6, "{e:?}");
         let p = e.max_pivot_error.unwrap();
         assert!(p > 2.0 && p < 3.5, "{e:?}");
+        assert_eq!(e.within_bar, 0, "{e:?}");
+    }
+
+    /// The bar: right type, axis ≤ 5°, and a revolute joint's pivot ≤ 2; a prismatic
+    /// joint has no pivot to check; a joint not found is never within it.
+    #[test]
+    fn the_bar_needs_the_type_the_axis_and_a_hinges_pivot() {
+        let m = |gt, pred: Option<JointType>, axis, pivot| JointMatch {
+            gt_child: 1,
+            gt_type: gt,
+            pred_child: pred.map(|_| 1),
+            pred_type: pred,
+            axis_deg: axis,
+            pivot_error: pivot,
+        };
+        let (r, p) = (JointType::Revolute, JointType::Prismatic);
+        assert!(m(r, Some(r), Some(5.0), Some(2.0)).within_bar());
+        assert!(!m(r, Some(r), Some(5.01), Some(0.1)).within_bar());
+        assert!(!m(r, Some(r), Some(0.1), Some(2.01)).within_bar());
+        assert!(!m(r, Some(r), Some(0.1), None).within_bar());
+        assert!(!m(r, Some(p), Some(0.1), None).within_bar());
+        assert!(m(p, Some(p), Some(4.0), None).within_bar());
+        assert!(!m(p, Some(r), Some(4.0), Some(0.1)).within_bar());
+        assert!(!m(r, None, None, None).within_bar());
     }
 }

@@ -110,6 +110,7 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   assert.equal(await page.locator('#metrics-wrap').isVisible(), true);
   assert.match(await page.locator('#metrics').innerText(), /Rand index/i);
   assert.match(await page.locator('#metrics').innerText(), /Joint types right/i);
+  assert.match(await page.locator('#metrics').innerText(), /Joints within 5° and 2 %[^\n]*\n[^\n]*\s+\d+ \/ \d+/i);
   const st = await canvasStats(page);
   assert.ok(st.lit > 500, 'points coloured by part are drawn');
 

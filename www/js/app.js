@@ -1027,6 +1027,7 @@ function renderMetrics() {
     row('Joint types right', 'of the found joints', `${jt.type_correct} / ${jt.found}`);
     if (jt.max_axis_deg != null) row('Largest axis error', 'degrees, found joints', jt.max_axis_deg);
     if (jt.max_pivot_error != null) row('Largest pivot error', '×100, found revolute joints', jt.max_pivot_error);
+    if (jt.within_bar != null) row('Joints within 5° and 2 %', 'right type, axis within 5°, a hinge\'s pivot within 2 % of the object size', `${jt.within_bar} / ${jt.joints}`);
   }
   for (const [k, v] of Object.entries(mt)) {
     if (seen.has(k) || v === null || typeof v === 'object') continue;
