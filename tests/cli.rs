@@ -2,8 +2,8 @@
 //! scores perfectly), `fit` + `eval` on an occluded bench-dev robot, `synth` writes a
 //! readable sequence, `articulate` re-poses a result, bad input gives a one-line
 //! error naming the file, an output that cannot be written fails before the fit, a
-//! reader closing the output pipe early is no crash, and a poorly explained balanced
-//! fit is done again from another seed, and `bench` reports a sequence's metrics and
+//! reader closing the output pipe early is no crash, a poorly explained balanced fit
+//! is done again from another seed, and `bench` reports a sequence's metrics and its
 //! joints in the bar.
 
 use std::path::{Path, PathBuf};
@@ -126,21 +126,29 @@ fn occluded_gripper_keeps_its_hand_where_it_was_seen() {
     assert!(recon <= 5.0, "reconstruction error {recon}: {m}");
 }
 
-/// `gsart synth laptop` (3 frames of 256 points) into `dir/laptop`, then `gsart truth`
-/// of it into `dir/r.json`; returns both paths.
-fn laptop_truth(dir: &Path) -> (PathBuf, PathBuf) {
+/// `gsart synth laptop` (`frames` frames of `points` points) into `dir/laptop`; returns
+/// its path.
+fn synth_laptop(dir: &Path, frames: usize, points: usize) -> PathBuf {
     let seq = dir.join("laptop");
+    let (frames, points) = (frames.to_string(), points.to_string());
     let (ok, _, err) = gsart(&[
         "synth",
         "laptop",
         "--out",
         seq.to_str().unwrap(),
         "--frames",
-        "3",
+        &frames,
         "--points",
-        "256",
+        &points,
     ]);
     assert!(ok, "{err}");
+    seq
+}
+
+/// `gsart synth laptop` (3 frames of 256 points) into `dir/laptop`, then `gsart truth`
+/// of it into `dir/r.json`; returns both paths.
+fn laptop_truth(dir: &Path) -> (PathBuf, PathBuf) {
+    let seq = synth_laptop(dir, 3, 256);
     assert!(seq.join("frame_002.ply").is_file() && seq.join("gt.json").is_file());
     let result = dir.join("r.json");
     let (ok, _, err) = gsart(&[
@@ -270,18 +278,7 @@ fn an_output_that_cannot_be_written_fails_before_the_fit() {
 #[test]
 fn bench_reports_a_sequence_with_its_joints_in_the_bar() {
     let dir = tmp("bench");
-    let seq = dir.join("laptop");
-    let (ok, _, err) = gsart(&[
-        "synth",
-        "laptop",
-        "--out",
-        seq.to_str().unwrap(),
-        "--frames",
-        "4",
-        "--points",
-        "512",
-    ]);
-    assert!(ok, "{err}");
+    let seq = synth_laptop(&dir, 4, 512);
     let json = dir.join("bench.json");
     let (ok, table, err) = gsart(&[
         "bench",
