@@ -717,7 +717,7 @@ mod cli {
         }
         if let Some(gt) = gt {
             let m = pipeline::evaluate(result, &seq, &gt)?;
-            eprintln!("metrics: {}", serde_json::to_string(&m).unwrap_or_default());
+            eprintln!("metrics: {}", m.summary());
         }
         Ok(())
     }

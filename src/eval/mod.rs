@@ -39,6 +39,35 @@ pub struct Metrics {
     pub notes: Vec<String>,
 }
 
+impl Metrics {
+    /// One line for a terminal: the five metrics and the joint accuracy (what `gsart
+    /// fit` prints; `gsart eval` gives every field as JSON). An absent metric is "–".
+    pub fn summary(&self) -> String {
+        let opt = |v: Option<String>| v.unwrap_or_else(|| "–".into());
+        let mut s = format!(
+            "mean RI {:.3} (canonical frame {:.3}) · recon {:.3} · flow {:.3} · TED {} · re-animation {}",
+            self.mean_ri,
+            self.canonical_ri,
+            self.reconstruction_error,
+            self.flow_error,
+            opt(self.tree_edit_distance.map(|t| t.to_string())),
+            opt(self.reanimation_error.map(|r| format!("{r:.3}"))),
+        );
+        if let Some(j) = &self.joints {
+            s += &format!(
+                " · joints: {} of {} found, {} of the right type, {} in the bar (axis ≤ {}°, pivot ≤ {})",
+                j.found,
+                j.joints,
+                j.type_correct,
+                j.within_bar,
+                joint_error::AXIS_BAR_DEG,
+                joint_error::PIVOT_BAR,
+            );
+        }
+        s
+    }
+}
+
 /// Evaluate `result` against `gt`. `canonical_points` and `canonical_labels` are the
 /// observed points of the result's canonical frame with their ground-truth labels
 /// (in the order of `result.labels[c]`); `frame_labels[k]` are the ground-truth labels
@@ -141,4 +170,44 @@ pub fn evaluate(
         joints,
         notes,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_summary_names_every_metric_and_the_joints_in_the_bar() {
+        let mut m = Metrics {
+            mean_ri: 0.93049,
+            canonical_ri: 0.9,
+            reconstruction_error: 0.3,
+            flow_error: 0.28,
+            tree_edit_distance: Some(1),
+            reanimation_error: None,
+            joints: Some(joint_error::JointErrors {
+                joints: 6,
+                found: 4,
+                type_correct: 3,
+                max_axis_deg: Some(7.0),
+                max_pivot_error: Some(1.0),
+                within_bar: 2,
+                per_joint: Vec::new(),
+            }),
+            notes: Vec::new(),
+        };
+        assert_eq!(
+            m.summary(),
+            "mean RI 0.930 (canonical frame 0.900) · recon 0.300 · flow 0.280 · TED 1 · \
+             re-animation – · joints: 4 of 6 found, 3 of the right type, 2 in the bar \
+             (axis ≤ 5°, pivot ≤ 2)"
+        );
+        m.joints = None;
+        m.tree_edit_distance = None;
+        assert!(
+            m.summary().ends_with("TED – · re-animation –"),
+            "{}",
+            m.summary()
+        );
+    }
 }
