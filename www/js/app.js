@@ -8,11 +8,15 @@ import { entriesFromDrop, entriesFromInput, classify, basename } from './files.j
 import { LossChart } from './chart.js';
 import { drawTree } from './tree.js';
 import { download, zip } from './save.js';
+import { EMBED, setupEmbed, syncEmbed, withoutEmbed, iframeCode } from './embed.js';
 
 const $ = (id) => document.getElementById(id);
 const ICON_PLAY = '<svg viewBox="0 0 24 24" width="16" height="16" aria-hidden="true"><path d="M7 4.5v15l12-7.5z" fill="currentColor"/></svg>';
 const ICON_PAUSE = '<svg viewBox="0 0 24 24" width="16" height="16" aria-hidden="true"><rect x="6" y="4.5" width="4" height="15" rx="1" fill="currentColor"/><rect x="14" y="4.5" width="4" height="15" rx="1" fill="currentColor"/></svg>';
 const params = new URLSearchParams(location.search);
+// `play=1` (a link's or a figure's option): the frames play once they are on view, and
+// again when a fit's model replaces them.
+const PLAY = params.get('play') === '1';
 
 const S = {
   view: null,
@@ -121,6 +125,20 @@ async function startView() {
   S.view.setGaussiansVisible(S.gaussiansOn);
 }
 
+/** A message over the 3D view: a title and a line of text (both plain text). */
+function viewMessage(title, text) {
+  const box = document.createElement('div');
+  box.className = 'box';
+  const h = document.createElement('h2');
+  h.textContent = title;
+  const p = document.createElement('p');
+  p.textContent = text;
+  box.append(h, p);
+  $('view-message').replaceChildren(box);
+  $('view-message').hidden = false;
+  $('empty-hint').hidden = true;
+}
+
 function hasWebgl2() {
   try { return !!document.createElement('canvas').getContext('webgl2'); } catch { return false; }
 }
@@ -149,6 +167,7 @@ function resetResult() {
   $('explore-empty').hidden = false;
   $('metrics-wrap').hidden = true;
   if (S.view) { S.view.clearGaussians(); S.view.clearAxes(); }
+  embedState();
 }
 
 function cancelFit(silent = false) {
@@ -225,6 +244,7 @@ function afterLoad(note = '') {
   setStepActive(good.length >= 2 ? 'step-fit' : 'step-load');
   if (good.length) showFrame(Math.min(S.current, good.length - 1), { frameBox: true });
   applyHashCamera();
+  embedState();
   if (params.get('fit') === '1' && !afterLoad.autoFitDone && good.length >= 2) {
     afterLoad.autoFitDone = true;
     startFit();
@@ -523,10 +543,17 @@ function setStage(key, frac, text = '') {
 }
 
 function fitUi(running) {
+  S.fitRunning = running;
   $('btn-fit').hidden = running;
   $('btn-cancel').hidden = !running;
   for (const el of $('settings').querySelectorAll('input, select')) el.disabled = running || ((el.id === 'parts-min' || el.id === 'parts-max') && $('parts-auto').checked);
   for (const el of document.querySelectorAll('#step-load button, #step-load input, .chip')) el.disabled = running;
+  embedState();
+}
+
+/** Embed mode's card follows the page: a model's joints, or the fit. */
+function embedState() {
+  syncEmbed({ joints: S.model ? S.model.joints().length : null, fitting: !!S.fitRunning, frames: goodFrames().length >= 2 });
 }
 
 // The loss a progress report's curve shows: [term, value] of its first term among the
@@ -823,7 +850,8 @@ function openResult(text, source, how, extra = {}) {
   try {
     model = wasm.Model.from_json(text, source || 'result');
   } catch (e) {
-    toast(errText(e), 'error', 9000);
+    if (EMBED) viewMessage('Could not open the model', errText(e));
+    else toast(errText(e), 'error', 9000);
     return false;
   }
   resetResult();
@@ -856,10 +884,13 @@ function openResult(text, source, how, extra = {}) {
   renderResult(extra);
   showFrame(Math.min(S.current, model.frames() - 1), { frameBox: how !== 'fit' });
   if (how !== 'fit') applyHashCamera();
-  if (!extra.provisional) {
+  if (PLAY && !extra.provisional) play();
+  if (!extra.provisional && !EMBED) {
+    // Not in an iframe: scrolling into view there would scroll the host page too.
     setStepActive('step-explore');
     $('step-explore').scrollIntoView({ block: 'start', behavior: 'smooth' });
   }
+  embedState();
   return true;
 }
 
@@ -930,6 +961,8 @@ function renderResult(extra = {}) {
     slider.setAttribute('aria-label', `Joint ${idx + 1} (${j.type}, part ${j.child})`);
     slider.dataset.child = String(j.child);
     slider.addEventListener('input', () => {
+      // Playing would put the frame's states back on the next frame.
+      stopPlay();
       S.states[j.child] = Number(slider.value);
       val.textContent = fmtState(S.states[j.child]);
       drawModel();
@@ -1082,23 +1115,51 @@ async function exportPng() {
   else toast('The screenshot could not be encoded.', 'error');
 }
 
-async function copyLink() {
+/**
+ * The link that opens what is on view: `?model=URL` for a model opened from a URL,
+ * `?example=NAME` for an example (with `fit=1` when `fitted`), the camera in the hash.
+ * Null for frames or a result that came from this machine, which have no URL.
+ */
+function shareUrl({ fitted = false } = {}) {
   const url = new URL(location.href);
+  for (const k of ['model', 'example', 'fit', 'embed']) url.searchParams.delete(k);
   if (S.view) {
     const h = new URLSearchParams();
     h.set('cam', S.view.cameraState());
     url.hash = h.toString();
   }
-  let note = '';
-  if (S.modelSource === 'url' && S.modelUrl) { url.searchParams.set('model', S.modelUrl); url.searchParams.delete('example'); }
-  else if (S.example) { url.searchParams.set('example', S.example); url.searchParams.delete('model'); }
-  else note = ' To share a fitted model, export the result JSON, host it, and open ?model=URL.';
+  if (S.modelSource === 'url' && S.modelUrl) url.searchParams.set('model', new URL(S.modelUrl, location.href).toString());
+  else if (S.example) {
+    url.searchParams.set('example', S.example);
+    if (fitted && S.model && S.modelSource === 'fit') url.searchParams.set('fit', '1');
+  } else return null;
+  return url;
+}
+
+const NOT_SHAREABLE = 'To share a fitted model, export the result JSON, host it, and open ?model=URL.';
+
+async function copyText(text, what, note = '') {
   try {
-    await navigator.clipboard.writeText(url.toString());
-    toast(`Link copied.${note}`, '', note ? 7000 : 3000);
+    await navigator.clipboard.writeText(text);
+    toast(`${what} copied.${note ? ` ${note}` : ''}`, '', note ? 7000 : 3000);
   } catch {
-    toast(url.toString(), '', 10000);
+    toast(text, '', 10000);
   }
+}
+
+async function copyLink() {
+  const url = shareUrl();
+  if (url) await copyText(url.toString(), 'Link');
+  else await copyText(location.href, 'Link', NOT_SHAREABLE);
+}
+
+/** An iframe for a project page: the view, the timeline and the sliders only. */
+async function copyEmbed() {
+  const url = shareUrl({ fitted: true });
+  if (!url) { toast(`Embedding needs a URL. ${NOT_SHAREABLE.replace('open ?model=URL', 'embed ?model=URL&embed=1')}`, 'error', 9000); return; }
+  url.searchParams.set('embed', '1');
+  const note = url.searchParams.get('fit') === '1' ? 'The figure fits the example in the visitor\'s browser, with the default settings.' : '';
+  await copyText(iframeCode(url.toString(), `${S.seqName || 'model'} (GSArt)`), 'Embed code', note);
 }
 
 // ------------------------------------------------------------------ events
@@ -1117,15 +1178,16 @@ function wire() {
   let depth = 0;
   const overlay = $('drop-overlay');
   window.addEventListener('dragenter', (e) => {
-    if (![...(e.dataTransfer?.types || [])].includes('Files')) return;
+    if (EMBED || ![...(e.dataTransfer?.types || [])].includes('Files')) return;
     e.preventDefault();
     depth++;
     overlay.hidden = false;
   });
-  window.addEventListener('dragover', (e) => { e.preventDefault(); if (e.dataTransfer) e.dataTransfer.dropEffect = 'copy'; });
+  window.addEventListener('dragover', (e) => { e.preventDefault(); if (e.dataTransfer) e.dataTransfer.dropEffect = EMBED ? 'none' : 'copy'; });
   window.addEventListener('dragleave', () => { depth = Math.max(0, depth - 1); if (!depth) overlay.hidden = true; });
   window.addEventListener('drop', async (e) => {
     e.preventDefault();
+    if (EMBED) return;
     depth = 0;
     overlay.hidden = true;
     if (S.job) { toast('A fit is running: cancel it before loading new files.', 'error'); return; }
@@ -1176,6 +1238,7 @@ function wire() {
   $('btn-export-urdf').addEventListener('click', exportUrdf);
   $('btn-export-png').addEventListener('click', exportPng);
   $('btn-share').addEventListener('click', copyLink);
+  $('btn-embed').addEventListener('click', copyEmbed);
 
   $('help-button').addEventListener('click', () => toggleHelp(true));
   $('help-close').addEventListener('click', () => toggleHelp(false));
@@ -1248,7 +1311,12 @@ async function openModelUrl(url) {
     if (openResult(text, basename(new URL(url, location.href).pathname) || 'model', 'url')) S.modelUrl = url;
   } catch (e) {
     $('sequence-summary').textContent = '';
-    toast(`Could not open ${url}: ${errText(e)}`, 'error', 10000);
+    // fetch rejects with a TypeError, and no status, when the network or CORS stops it.
+    const why = e instanceof TypeError
+      ? `${errText(e)} (the server is unreachable or does not allow other sites to read the file: it needs CORS)`
+      : errText(e);
+    if (EMBED) viewMessage('Could not open the model', `${url}: ${why}`);
+    else toast(`Could not open ${url}: ${why}`, 'error', 10000);
   }
 }
 
@@ -1267,14 +1335,20 @@ async function main() {
   }
   $('version').textContent = wasm.version();
   wire();
+  setupEmbed({ fullUrl: () => withoutEmbed(location.href) });
   renderExamples();
   await startView();
+  // Display options of a link or a figure: `gaussians=0` hides the Gaussians, `play=1`
+  // plays the frames once something is on view.
+  if (params.get('gaussians') === '0') toggleGaussians();
   document.body.dataset.ready = '1';
   const model = params.get('model');
   const example = params.get('example');
   if (model) await openModelUrl(model);
   else if (example) await loadExample(example);
+  else if (EMBED) viewMessage('Nothing to show', 'An embedded GSArt figure needs ?model=URL (a result JSON) or ?example=NAME.');
   else setStepActive('step-load');
+  if (PLAY && !S.fitRunning && !S.playing) play();
   document.body.dataset.loaded = '1';
 }
 

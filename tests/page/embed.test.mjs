@@ -1,0 +1,139 @@
+// Embed mode (`?embed=1`, www/js/embed.js): the page as an interactive figure in another
+// page's iframe. An example fitted in place shows only the view, the timeline and the
+// card (the fit's progress, then the joints' sliders); `play=1` plays the frames; a shared
+// model in a real iframe opens without scrolling its host page; errors show over the view;
+// the full page's "Embed code" gives an iframe that opens the same model.
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import { startServer, launch, newPage, waitLoaded, canvasStats, canvasPng, pixelDiff, shot } from './helpers.mjs';
+
+let srv, browser;
+before(async () => { srv = await startServer(); browser = await launch(); });
+after(async () => { await browser?.close(); srv?.server.close(); });
+
+let modelJson = null; // the fitted laptop's result, shared by the later tests
+
+/** Serves `text` as /shared/model.json to every page of the context (iframes too). */
+async function serveModel(context, text) {
+  // Match on the path: a glob would also match the page URL, whose query names the model.
+  await context.route((url) => url.pathname === '/shared/model.json', (r) => r.fulfill({ body: text, contentType: 'application/json' }));
+}
+
+const visible = (page, sel) => page.locator(sel).isVisible();
+
+test('an example fitted in an embedded figure shows the view, the timeline and its joints only', { timeout: 600_000 }, async () => {
+  const { page, errors, context } = await newPage(browser, { width: 720, height: 480 });
+  await page.goto(`${srv.base}/?example=laptop&fit=1&embed=1&play=1`);
+  await waitLoaded(page);
+  assert.equal(await visible(page, '.topbar'), false, 'no top bar');
+  assert.equal(await visible(page, '.panel'), false, 'no panel');
+  const box = await page.locator('#view').boundingBox();
+  assert.deepEqual([box.x, box.y, box.width, box.height], [0, 0, 720, 480], 'the view fills the frame');
+  // While the fit runs, the card holds its progress and its Cancel button.
+  await page.waitForFunction(() => /Fitting/.test(document.querySelector('#embed-toggle').textContent));
+  assert.equal(await visible(page, '#btn-cancel'), true);
+  assert.equal(await visible(page, '#stage-list'), true);
+  await page.waitForFunction(() => /^Joints/.test(document.querySelector('#embed-toggle').textContent), null, { timeout: 540_000 });
+  const njoints = await page.evaluate(() => window.gsart.state.model.joints().length);
+  assert.ok(njoints >= 1, 'the laptop has its hinge');
+  assert.equal(await page.locator('#embed-toggle').textContent(), `Joints (${njoints})`);
+  assert.equal(await page.locator('#embed-card input[type=range]').count(), njoints);
+  assert.equal(await visible(page, '#stage-list'), false, 'the progress is gone');
+  assert.equal(await visible(page, '#timeline'), true);
+  // play=1: the fitted model's frames play.
+  assert.equal(await page.locator('#btn-play').getAttribute('aria-label'), 'Pause');
+  const k0 = await page.evaluate(() => window.gsart.state.current);
+  await page.waitForFunction((k) => window.gsart.state.current !== k, k0);
+  // A slider stops the play (which would put the frame's states back) and re-poses.
+  const slider = page.locator('#embed-card input[type=range]').first();
+  await slider.evaluate((el) => { el.value = el.min; el.dispatchEvent(new Event('input', { bubbles: true })); });
+  assert.equal(await page.locator('#btn-play').getAttribute('aria-label'), 'Play');
+  await page.waitForTimeout(500);
+  const a = await canvasPng(page);
+  await slider.evaluate((el) => { el.value = el.max; el.dispatchEvent(new Event('input', { bubbles: true })); });
+  await page.waitForTimeout(500);
+  assert.ok(await pixelDiff(page, a, await canvasPng(page)) > 100, 'the slider re-poses the model');
+  await shot(page, 'embed-example');
+  // The link opens the same example in the full page.
+  const href = new URL(await page.locator('#embed-open').getAttribute('href'));
+  assert.equal(href.searchParams.get('example'), 'laptop');
+  assert.equal(href.searchParams.get('fit'), '1');
+  assert.equal(href.searchParams.get('embed'), null);
+  modelJson = await page.evaluate(() => window.gsart.state.model.to_json(true));
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
+test('a shared model in an iframe opens with its sliders and leaves the host page where it was', { timeout: 120_000 }, async (t) => {
+  if (!modelJson) { t.skip('needs the fitted model of the previous test'); return; }
+  const { page, errors, context } = await newPage(browser, { width: 900, height: 700 });
+  await serveModel(context, modelJson);
+  // A host page taller than the window, the figure below the fold (a small one, so its
+  // card starts folded).
+  await context.route((url) => url.pathname === '/host.html', (r) => r.fulfill({
+    contentType: 'text/html',
+    body: '<!doctype html><body style="margin:0"><div style="height:1500px">Paper text</div>'
+      + '<iframe src="/?model=/shared/model.json&embed=1" width="420" height="300" style="border:0"></iframe>'
+      + '<div style="height:1500px"></div></body>',
+  }));
+  await page.goto(`${srv.base}/host.html`);
+  const frame = page.frames().find((f) => f !== page.mainFrame());
+  await frame.waitForFunction(() => document.body.dataset.loaded === '1', null, { timeout: 60_000 });
+  await frame.waitForSelector('#embed-card.has-result');
+  await page.waitForTimeout(500);
+  assert.equal(await page.evaluate(() => window.scrollY), 0, 'opening the model does not scroll the host page');
+  // Folded in a small figure; one click shows the sliders.
+  assert.equal(await frame.locator('#embed-toggle').getAttribute('aria-expanded'), 'false');
+  assert.equal(await frame.locator('#joint-list').isVisible(), false);
+  await page.evaluate(() => window.scrollTo(0, 1300));
+  await frame.locator('#embed-toggle').click();
+  assert.equal(await frame.locator('#embed-toggle').getAttribute('aria-expanded'), 'true');
+  assert.ok(await frame.locator('#joint-list input[type=range]').first().isVisible());
+  assert.ok((await canvasStats(frame)).lit > 500, 'the figure shows the model');
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
+test('an embedded figure says what is wrong over the view', async () => {
+  const { page, context } = await newPage(browser, { width: 600, height: 400 });
+  await page.goto(`${srv.base}/?model=/missing/model.json&embed=1`);
+  await waitLoaded(page);
+  assert.equal(await visible(page, '#view-message'), true);
+  const text = await page.locator('#view-message').innerText();
+  assert.match(text, /Could not open the model/);
+  assert.match(text, /missing\/model\.json: HTTP 404/);
+  await page.goto(`${srv.base}/?embed=1`);
+  await waitLoaded(page);
+  assert.match(await page.locator('#view-message').innerText(), /needs \?model=URL/);
+  assert.equal(await visible(page, '#embed-card'), false);
+  await context.close();
+});
+
+test('the full page gives the embed code of a shared model', { timeout: 120_000 }, async (t) => {
+  if (!modelJson) { t.skip('needs the fitted model of the first test'); return; }
+  const { page, errors, context } = await newPage(browser);
+  await serveModel(context, modelJson);
+  await page.addInitScript(() => {
+    window.copied = [];
+    Object.defineProperty(navigator, 'clipboard', { value: { writeText: async (s) => { window.copied.push(s); } } });
+  });
+  await page.goto(`${srv.base}/?model=/shared/model.json`);
+  await waitLoaded(page);
+  await page.waitForSelector('#explore:not([hidden])');
+  await page.locator('#btn-embed').click();
+  await page.waitForFunction(() => window.copied.length === 1);
+  const code = await page.evaluate(() => window.copied[0]);
+  const src = code.match(/^<iframe src="([^"]+)"/)?.[1]?.replace(/&amp;/g, '&');
+  assert.ok(src, `an iframe: ${code}`);
+  const url = new URL(src);
+  assert.equal(url.searchParams.get('embed'), '1');
+  assert.equal(url.searchParams.get('model'), `${srv.base}/shared/model.json`);
+  assert.match(url.hash, /cam=/, 'the camera comes along');
+  // The code opens the model as a figure.
+  await page.goto(src);
+  await waitLoaded(page);
+  await page.waitForSelector('#embed-card.has-result');
+  assert.equal(await visible(page, '.panel'), false);
+  assert.deepEqual(errors, []);
+  await context.close();
+});
