@@ -2,7 +2,9 @@
 // page's iframe. An example fitted in place shows only the view, the timeline and the
 // card (the fit's progress, then the joints' sliders); `play=1` plays the frames; a shared
 // model in a real iframe opens without scrolling its host page; errors show over the view;
-// the full page's "Embed code" gives an iframe that opens the same model.
+// the full page's "Embed code" gives an iframe that opens the same model, or, for an
+// example fitted on the page, one that fits it again with the same settings to the same
+// result.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { startServer, launch, newPage, waitLoaded, canvasStats, canvasPng, pixelDiff, shot } from './helpers.mjs';
@@ -23,7 +25,8 @@ const visible = (page, sel) => page.locator(sel).isVisible();
 
 test('an example fitted in an embedded figure shows the view, the timeline and its joints only', { timeout: 600_000 }, async () => {
   const { page, errors, context } = await newPage(browser, { width: 720, height: 480 });
-  await page.goto(`${srv.base}/?example=laptop&fit=1&embed=1&play=1`);
+  // The link's fit settings (settings.js) keep the test short: the laptop has 2 parts.
+  await page.goto(`${srv.base}/?example=laptop&fit=1&embed=1&play=1&quality=fast&parts=2..4`);
   await waitLoaded(page);
   assert.equal(await visible(page, '.topbar'), false, 'no top bar');
   assert.equal(await visible(page, '.panel'), false, 'no panel');
@@ -34,6 +37,8 @@ test('an example fitted in an embedded figure shows the view, the timeline and i
   assert.equal(await visible(page, '#btn-cancel'), true);
   assert.equal(await visible(page, '#stage-list'), true);
   await page.waitForFunction(() => /^Joints/.test(document.querySelector('#embed-toggle').textContent), null, { timeout: 540_000 });
+  const notes = await page.evaluate(() => window.gsart.state.model.info().notes.join('\n'));
+  assert.match(notes, /m = \d of \[2, 4\]/, 'the fit tried the link\'s part counts');
   const njoints = await page.evaluate(() => window.gsart.state.model.joints().length);
   assert.ok(njoints >= 1, 'the laptop has its hinge');
   assert.equal(await page.locator('#embed-toggle').textContent(), `Joints (${njoints})`);
@@ -58,6 +63,7 @@ test('an example fitted in an embedded figure shows the view, the timeline and i
   const href = new URL(await page.locator('#embed-open').getAttribute('href'));
   assert.equal(href.searchParams.get('example'), 'laptop');
   assert.equal(href.searchParams.get('fit'), '1');
+  assert.equal(href.searchParams.get('quality'), 'fast');
   assert.equal(href.searchParams.get('embed'), null);
   modelJson = await page.evaluate(() => window.gsart.state.model.to_json(true));
   assert.deepEqual(errors, []);
@@ -106,6 +112,12 @@ test('an embedded figure says what is wrong over the view', async () => {
   await waitLoaded(page);
   assert.match(await page.locator('#view-message').innerText(), /needs \?model=URL/);
   assert.equal(await visible(page, '#embed-card'), false);
+  // A link's setting that cannot be used is named, and the form keeps its default.
+  await page.goto(`${srv.base}/?example=laptop&quality=best&seed=4`);
+  await waitLoaded(page);
+  assert.match(await page.locator('#toast').innerText(), /Ignored in the link: quality=best: use fast, balanced, paper/);
+  assert.equal(await page.locator('input[name=quality]:checked').getAttribute('value'), 'balanced');
+  assert.equal(await page.locator('#seed').inputValue(), '4');
   await context.close();
 });
 
@@ -134,6 +146,38 @@ test('the full page gives the embed code of a shared model', { timeout: 120_000 
   await waitLoaded(page);
   await page.waitForSelector('#embed-card.has-result');
   assert.equal(await visible(page, '.panel'), false);
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
+test('an example fitted on the page embeds as a figure that fits it again to the same result', { timeout: 600_000 }, async () => {
+  const { page, errors, context } = await newPage(browser);
+  await page.addInitScript(() => {
+    window.copied = [];
+    Object.defineProperty(navigator, 'clipboard', { value: { writeText: async (s) => { window.copied.push(s); } } });
+  });
+  await page.goto(`${srv.base}/?example=laptop`);
+  await waitLoaded(page);
+  // Settings changed after the example was generated (with seed 0).
+  await page.locator('label:has(input[value=fast])').click();
+  await page.getByLabel('Automatic part range').uncheck();
+  await page.getByLabel('Minimum part count').fill('2');
+  await page.getByLabel('Maximum part count').fill('3');
+  await page.getByLabel('Seed').fill('1');
+  await page.locator('#btn-fit').click();
+  await page.waitForFunction(() => /Done in/.test(document.querySelector('#fit-status').innerText), null, { timeout: 540_000 });
+  const mine = await page.evaluate(() => JSON.parse(window.gsart.state.model.to_json(false)));
+  await page.locator('#btn-embed').click();
+  await page.waitForFunction(() => window.copied.length === 1);
+  const src = (await page.evaluate(() => window.copied[0])).match(/^<iframe src="([^"]+)"/)[1].replace(/&amp;/g, '&');
+  const q = new URL(src).searchParams;
+  assert.deepEqual(Object.fromEntries(q), { example: 'laptop', quality: 'fast', seed: '1', parts: '2..3', example_seed: '0', fit: '1', embed: '1' });
+  await page.goto(src);
+  await waitLoaded(page);
+  await page.waitForSelector('#embed-card.has-result', { timeout: 540_000 });
+  const theirs = await page.evaluate(() => JSON.parse(window.gsart.state.model.to_json(false)));
+  assert.deepEqual(theirs.labels, mine.labels, 'the same segmentation');
+  assert.deepEqual(theirs.joints, mine.joints, 'the same joints');
   assert.deepEqual(errors, []);
   await context.close();
 });

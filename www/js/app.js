@@ -9,6 +9,7 @@ import { LossChart } from './chart.js';
 import { drawTree } from './tree.js';
 import { download, zip } from './save.js';
 import { EMBED, setupEmbed, syncEmbed, withoutEmbed, iframeCode } from './embed.js';
+import { DEFAULTS, SETTING_KEYS, settingsFromParams, writeSettings, exampleSeed } from './settings.js';
 
 const $ = (id) => document.getElementById(id);
 const ICON_PLAY = '<svg viewBox="0 0 24 24" width="16" height="16" aria-hidden="true"><path d="M7 4.5v15l12-7.5z" fill="currentColor"/></svg>';
@@ -356,14 +357,15 @@ async function handleEntries(entries) {
   });
 }
 
-async function loadExample(name) {
+async function loadExample(name, { seed = null } = {}) {
   cancelFit(true);
+  if (seed === null) seed = Number($('seed').value) || 0;
   for (const b of document.querySelectorAll('.chip')) b.classList.toggle('current', b.dataset.example === name);
   const token = ++S.loadToken;
   $('sequence-summary').innerHTML = `<span class="muted">Generating “${escapeHtml(name)}”…</span>`;
   let ex;
   try {
-    const job = new WorkerJob({ type: 'example', name, seed: Number($('seed').value) || 0 });
+    const job = new WorkerJob({ type: 'example', name, seed });
     ex = (await job.promise).example;
   } catch (e) {
     toast(`Could not generate the example: ${errText(e)}`, 'error', 8000);
@@ -374,6 +376,7 @@ async function loadExample(name) {
   resetResult();
   S.seqName = `${name} (example)`;
   S.example = name;
+  S.exampleSeed = seed;
   S.gt = ex.gt;
   S.frames = ex.frames.map((f) => ({ name: f.name, points: f.points, labels: f.labels ?? null, error: null, status: null }));
   S.current = 0;
@@ -594,6 +597,8 @@ async function startFit() {
   if (good.length < 2) { toast('Load at least 2 frames first.', 'error'); return; }
   let opts, range;
   try { ({ opts, range } = readOptions()); } catch (e) { toast(errText(e), 'error'); return; }
+  // What a link to this fit's model carries (`shareUrl`).
+  S.fitOpts = opts;
   stopPlay();
   resetResult();
   const gtOk = S.gt && good.length === S.frames.length && good.every((f) => f.labels);
@@ -1122,7 +1127,7 @@ async function exportPng() {
  */
 function shareUrl({ fitted = false } = {}) {
   const url = new URL(location.href);
-  for (const k of ['model', 'example', 'fit', 'embed']) url.searchParams.delete(k);
+  for (const k of ['model', 'example', 'fit', 'embed', ...SETTING_KEYS]) url.searchParams.delete(k);
   if (S.view) {
     const h = new URLSearchParams();
     h.set('cam', S.view.cameraState());
@@ -1131,7 +1136,11 @@ function shareUrl({ fitted = false } = {}) {
   if (S.modelSource === 'url' && S.modelUrl) url.searchParams.set('model', new URL(S.modelUrl, location.href).toString());
   else if (S.example) {
     url.searchParams.set('example', S.example);
-    if (fitted && S.model && S.modelSource === 'fit') url.searchParams.set('fit', '1');
+    if (S.model && S.modelSource === 'fit' && S.fitOpts) {
+      // The settings of the fit on view: the link's page fits as this one did.
+      writeSettings(url, S.fitOpts, S.exampleSeed);
+      if (fitted) url.searchParams.set('fit', '1');
+    } else writeSettings(url, { ...DEFAULTS, seed: S.exampleSeed ?? 0 });
   } else return null;
   return url;
 }
@@ -1158,7 +1167,7 @@ async function copyEmbed() {
   const url = shareUrl({ fitted: true });
   if (!url) { toast(`Embedding needs a URL. ${NOT_SHAREABLE.replace('open ?model=URL', 'embed ?model=URL&embed=1')}`, 'error', 9000); return; }
   url.searchParams.set('embed', '1');
-  const note = url.searchParams.get('fit') === '1' ? 'The figure fits the example in the visitor\'s browser, with the default settings.' : '';
+  const note = url.searchParams.get('fit') === '1' ? 'The figure fits the example in the visitor\'s browser, with this fit\'s settings.' : '';
   await copyText(iframeCode(url.toString(), `${S.seqName || 'model'} (GSArt)`), 'Embed code', note);
 }
 
@@ -1320,6 +1329,24 @@ async function openModelUrl(url) {
   }
 }
 
+/** Sets the fit form from the link's settings (`settings.js`); says which were ignored. */
+function applyUrlSettings() {
+  const { values, problems } = settingsFromParams(params);
+  if (values.quality) document.querySelector(`input[name=quality][value=${values.quality}]`).checked = true;
+  if (values.occlusion) $('occlusion').value = values.occlusion;
+  if (values.seed !== undefined) $('seed').value = String(values.seed);
+  if (values.restarts) $('restarts').value = String(values.restarts);
+  if (values.medial_init !== undefined) $('medial-init').checked = values.medial_init;
+  if (values.parts) {
+    $('parts-auto').checked = false;
+    $('parts-min').value = String(values.parts[0]);
+    $('parts-max').value = String(values.parts[1]);
+    $('parts-min').disabled = false;
+    $('parts-max').disabled = false;
+  }
+  if (problems.length) toast(`Ignored in the link: ${problems.join('; ')}.`, 'error', 9000);
+}
+
 // ------------------------------------------------------------------ start
 
 async function main() {
@@ -1336,6 +1363,7 @@ async function main() {
   $('version').textContent = wasm.version();
   wire();
   setupEmbed({ fullUrl: () => withoutEmbed(location.href) });
+  applyUrlSettings();
   renderExamples();
   await startView();
   // Display options of a link or a figure: `gaussians=0` hides the Gaussians, `play=1`
@@ -1345,7 +1373,7 @@ async function main() {
   const model = params.get('model');
   const example = params.get('example');
   if (model) await openModelUrl(model);
-  else if (example) await loadExample(example);
+  else if (example) await loadExample(example, { seed: exampleSeed(params, Number($('seed').value) || 0) });
   else if (EMBED) viewMessage('Nothing to show', 'An embedded GSArt figure needs ?model=URL (a result JSON) or ?example=NAME.');
   else setStepActive('step-load');
   if (PLAY && !S.fitRunning && !S.playing) play();
