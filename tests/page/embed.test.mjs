@@ -79,7 +79,7 @@ test('a shared model in an iframe opens with its sliders and leaves the host pag
   await context.route((url) => url.pathname === '/host.html', (r) => r.fulfill({
     contentType: 'text/html',
     body: '<!doctype html><body style="margin:0"><div style="height:1500px">Paper text</div>'
-      + '<iframe src="/?model=/shared/model.json&embed=1" width="420" height="300" style="border:0"></iframe>'
+      + '<iframe src="/?model=/shared/model.json&embed=1&title=Figure%203" width="420" height="300" style="border:0"></iframe>'
       + '<div style="height:1500px"></div></body>',
   }));
   await page.goto(`${srv.base}/host.html`);
@@ -88,6 +88,7 @@ test('a shared model in an iframe opens with its sliders and leaves the host pag
   await frame.waitForSelector('#embed-card.has-result');
   await page.waitForTimeout(500);
   assert.equal(await page.evaluate(() => window.scrollY), 0, 'opening the model does not scroll the host page');
+  assert.equal(await frame.locator('#hud-title').textContent(), 'Figure 3', 'the link\'s title');
   // Folded in a small figure; one click shows the sliders.
   assert.equal(await frame.locator('#embed-toggle').getAttribute('aria-expanded'), 'false');
   assert.equal(await frame.locator('#joint-list').isVisible(), false);

@@ -428,7 +428,8 @@ function updateHud() {
   const n = frameCount();
   if (!n) { $('hud-title').textContent = ''; $('hud-sub').textContent = ''; return; }
   const k = S.current;
-  let title = S.seqName || '';
+  // `title=` (a figure's caption) names what is on view instead of its file or example.
+  let title = params.get('title') ?? (S.seqName || '');
   let sub = '';
   if (S.model) {
     const fname = goodFrames()[k]?.name;
