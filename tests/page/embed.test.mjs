@@ -23,6 +23,23 @@ async function serveModel(context, text) {
 
 const visible = (page, sel) => page.locator(sel).isVisible();
 
+/** What the page copies goes to `window.copied` (headless Chromium has no clipboard to read). */
+async function recordClipboard(page) {
+  await page.addInitScript(() => {
+    window.copied = [];
+    Object.defineProperty(navigator, 'clipboard', { value: { writeText: async (s) => { window.copied.push(s); } } });
+  });
+}
+
+/** The src of the iframe the page copied last ("Embed code"). */
+async function copiedIframeSrc(page) {
+  await page.waitForFunction(() => window.copied.length >= 1);
+  const code = await page.evaluate(() => window.copied.at(-1));
+  const src = code.match(/^<iframe src="([^"]+)"/)?.[1]?.replace(/&amp;/g, '&');
+  assert.ok(src, `an iframe: ${code}`);
+  return src;
+}
+
 test('an example fitted in an embedded figure shows the view, the timeline and its joints only', { timeout: 600_000 }, async () => {
   const { page, errors, context } = await newPage(browser, { width: 720, height: 480 });
   // The link's fit settings (settings.js) keep the test short: the laptop has 2 parts.
@@ -126,18 +143,12 @@ test('the full page gives the embed code of a shared model', { timeout: 120_000 
   if (!modelJson) { t.skip('needs the fitted model of the first test'); return; }
   const { page, errors, context } = await newPage(browser);
   await serveModel(context, modelJson);
-  await page.addInitScript(() => {
-    window.copied = [];
-    Object.defineProperty(navigator, 'clipboard', { value: { writeText: async (s) => { window.copied.push(s); } } });
-  });
+  await recordClipboard(page);
   await page.goto(`${srv.base}/?model=/shared/model.json`);
   await waitLoaded(page);
   await page.waitForSelector('#explore:not([hidden])');
   await page.locator('#btn-embed').click();
-  await page.waitForFunction(() => window.copied.length === 1);
-  const code = await page.evaluate(() => window.copied[0]);
-  const src = code.match(/^<iframe src="([^"]+)"/)?.[1]?.replace(/&amp;/g, '&');
-  assert.ok(src, `an iframe: ${code}`);
+  const src = await copiedIframeSrc(page);
   const url = new URL(src);
   assert.equal(url.searchParams.get('embed'), '1');
   assert.equal(url.searchParams.get('model'), `${srv.base}/shared/model.json`);
@@ -153,10 +164,7 @@ test('the full page gives the embed code of a shared model', { timeout: 120_000 
 
 test('an example fitted on the page embeds as a figure that fits it again to the same result', { timeout: 600_000 }, async () => {
   const { page, errors, context } = await newPage(browser);
-  await page.addInitScript(() => {
-    window.copied = [];
-    Object.defineProperty(navigator, 'clipboard', { value: { writeText: async (s) => { window.copied.push(s); } } });
-  });
+  await recordClipboard(page);
   await page.goto(`${srv.base}/?example=laptop`);
   await waitLoaded(page);
   // Settings changed after the example was generated (with seed 0).
@@ -169,8 +177,7 @@ test('an example fitted on the page embeds as a figure that fits it again to the
   await page.waitForFunction(() => /Done in/.test(document.querySelector('#fit-status').innerText), null, { timeout: 540_000 });
   const mine = await page.evaluate(() => JSON.parse(window.gsart.state.model.to_json(false)));
   await page.locator('#btn-embed').click();
-  await page.waitForFunction(() => window.copied.length === 1);
-  const src = (await page.evaluate(() => window.copied[0])).match(/^<iframe src="([^"]+)"/)[1].replace(/&amp;/g, '&');
+  const src = await copiedIframeSrc(page);
   const q = new URL(src).searchParams;
   assert.deepEqual(Object.fromEntries(q), { example: 'laptop', quality: 'fast', seed: '1', parts: '2..3', example_seed: '0', fit: '1', embed: '1' });
   await page.goto(src);
