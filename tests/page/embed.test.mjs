@@ -126,6 +126,9 @@ test('an embedded figure says what is wrong over the view', async () => {
   const text = await page.locator('#view-message').innerText();
   assert.match(text, /Could not open the model/);
   assert.match(text, /missing\/model\.json: HTTP 404/);
+  await page.goto(`${srv.base}/?example=drawer&embed=1`);
+  await waitLoaded(page);
+  assert.match(await page.locator('#view-message').innerText(), /Could not generate the example[\s\S]*drawer/);
   await page.goto(`${srv.base}/?embed=1`);
   await waitLoaded(page);
   assert.match(await page.locator('#view-message').innerText(), /needs \?model=URL/);

@@ -368,7 +368,8 @@ async function loadExample(name, { seed = null } = {}) {
     const job = new WorkerJob({ type: 'example', name, seed });
     ex = (await job.promise).example;
   } catch (e) {
-    toast(`Could not generate the example: ${errText(e)}`, 'error', 8000);
+    if (EMBED) viewMessage('Could not generate the example', errText(e));
+    else toast(`Could not generate the example: ${errText(e)}`, 'error', 8000);
     $('sequence-summary').textContent = '';
     return;
   }
