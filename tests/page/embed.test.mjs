@@ -165,6 +165,23 @@ test('the full page gives the embed code of a shared model', { timeout: 120_000 
   await context.close();
 });
 
+test('a model opened from a file is saved for its figure, whose code leaves its address to fill in', { timeout: 120_000 }, async (t) => {
+  if (!modelJson) { t.skip('needs the fitted model of the first test'); return; }
+  const { page, errors, context } = await newPage(browser);
+  await recordClipboard(page);
+  await page.goto(`${srv.base}/`);
+  await waitLoaded(page);
+  await page.locator('#file-input').setInputFiles({ name: 'figure.gsart.json', mimeType: 'application/json', buffer: Buffer.from(modelJson) });
+  await page.waitForSelector('#explore:not([hidden])');
+  const [dl] = await Promise.all([page.waitForEvent('download'), page.locator('#btn-embed').click()]);
+  assert.equal(dl.suggestedFilename(), 'figure.gsart.json', 'the result JSON, named once');
+  const src = await copiedIframeSrc(page);
+  assert.match(src, /\?model=https:\/\/YOUR\.HOST\/PATH\/figure\.gsart\.json&embed=1#cam=/, 'a readable place-holder');
+  assert.match(await page.locator('#toast').innerText(), /Saved figure\.gsart\.json: put it online/);
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
 test('an example fitted on the page embeds as a figure that fits it again to the same result', { timeout: 600_000 }, async () => {
   const { page, errors, context } = await newPage(browser);
   await recordClipboard(page);

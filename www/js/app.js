@@ -8,7 +8,7 @@ import { entriesFromDrop, entriesFromInput, classify, basename } from './files.j
 import { LossChart } from './chart.js';
 import { drawTree } from './tree.js';
 import { download, zip } from './save.js';
-import { EMBED, setupEmbed, syncEmbed, withoutEmbed, iframeCode } from './embed.js';
+import { EMBED, setupEmbed, syncEmbed, withoutEmbed, iframeCode, readableUrl } from './embed.js';
 import { DEFAULTS, SETTING_KEYS, settingsFromParams, writeSettings, exampleSeed } from './settings.js';
 
 const $ = (id) => document.getElementById(id);
@@ -1086,7 +1086,7 @@ function renderMetrics() {
 
 // ------------------------------------------------------------------ export & share
 
-function exportName() { return safeName(S.seqName.replace(/ \(example\)$/, '')); }
+function exportName() { return safeName(S.seqName.replace(/ \(example\)$/, '').replace(/(\.gsart)?\.json$/i, '')); }
 
 function exportJson() {
   if (!S.model) return;
@@ -1123,11 +1123,12 @@ async function exportPng() {
 }
 
 /**
- * The link that opens what is on view: `?model=URL` for a model opened from a URL,
- * `?example=NAME` for an example (with `fit=1` when `fitted`), the camera in the hash.
- * Null for frames or a result that came from this machine, which have no URL.
+ * The link that opens what is on view: `?model=URL` for a model opened from a URL (or
+ * `model`, given), `?example=NAME` for an example (with `fit=1` when `fitted`), the
+ * camera in the hash. Null for frames or a result that came from this machine, which
+ * have no URL.
  */
-function shareUrl({ fitted = false } = {}) {
+function shareUrl({ fitted = false, model = null } = {}) {
   const url = new URL(location.href);
   for (const k of ['model', 'example', 'fit', 'embed', ...SETTING_KEYS]) url.searchParams.delete(k);
   if (S.view) {
@@ -1135,7 +1136,8 @@ function shareUrl({ fitted = false } = {}) {
     h.set('cam', S.view.cameraState());
     url.hash = h.toString();
   }
-  if (S.modelSource === 'url' && S.modelUrl) url.searchParams.set('model', new URL(S.modelUrl, location.href).toString());
+  if (model) url.searchParams.set('model', model);
+  else if (S.modelSource === 'url' && S.modelUrl) url.searchParams.set('model', new URL(S.modelUrl, location.href).toString());
   else if (S.example) {
     url.searchParams.set('example', S.example);
     if (S.model && S.modelSource === 'fit' && S.fitOpts) {
@@ -1147,7 +1149,7 @@ function shareUrl({ fitted = false } = {}) {
   return url;
 }
 
-const NOT_SHAREABLE = 'To share a fitted model, export the result JSON, host it, and open ?model=URL.';
+const NOT_SHAREABLE = 'To share a fitted model, export the result JSON, put it online, and open ?model=URL.';
 
 async function copyText(text, what, note = '') {
   try {
@@ -1160,17 +1162,27 @@ async function copyText(text, what, note = '') {
 
 async function copyLink() {
   const url = shareUrl();
-  if (url) await copyText(url.toString(), 'Link');
+  if (url) await copyText(readableUrl(url), 'Link');
   else await copyText(location.href, 'Link', NOT_SHAREABLE);
 }
 
-/** An iframe for a project page: the view, the timeline and the sliders only. */
+/**
+ * An iframe for a project page: the view, the timeline and the sliders only. A model
+ * fitted here or opened from a file has no URL yet: its result JSON is saved, and the
+ * code names it at a place-holder address to replace with where it is put.
+ */
 async function copyEmbed() {
-  const url = shareUrl({ fitted: true });
-  if (!url) { toast(`Embedding needs a URL. ${NOT_SHAREABLE.replace('open ?model=URL', 'embed ?model=URL&embed=1')}`, 'error', 9000); return; }
+  let url = shareUrl({ fitted: true });
+  let note = url?.searchParams.get('fit') === '1' ? 'The figure fits the example in the visitor\'s browser, with this fit\'s settings.' : '';
+  if (!url) {
+    if (!S.model) { toast('Nothing to embed yet: fit the frames first, or open a model.', 'error', 6000); return; }
+    const file = `${exportName()}.gsart.json`;
+    exportJson();
+    url = shareUrl({ model: `https://YOUR.HOST/PATH/${file}` });
+    note = `Saved ${file}: put it online where the figure's page can read it, and write its address in place of https://YOUR.HOST/PATH/${file}.`;
+  }
   url.searchParams.set('embed', '1');
-  const note = url.searchParams.get('fit') === '1' ? 'The figure fits the example in the visitor\'s browser, with this fit\'s settings.' : '';
-  await copyText(iframeCode(url.toString(), `${S.seqName || 'model'} (GSArt)`), 'Embed code', note);
+  await copyText(iframeCode(readableUrl(url), `${S.seqName || 'model'} (GSArt)`), 'Embed code', note);
 }
 
 // ------------------------------------------------------------------ events

@@ -67,3 +67,13 @@ export function iframeCode(src, title) {
   return `<iframe src="${esc(src)}" title="${esc(title)}" width="720" height="480" `
     + 'style="border:0;border-radius:8px;max-width:100%" loading="lazy" allowfullscreen></iframe>';
 }
+
+/**
+ * `url` as text with a readable query: `/` and `:` stay unescaped (RFC 3986 allows both
+ * in a query), so a model URL inside a link can be read and replaced by hand.
+ */
+export function readableUrl(url) {
+  const enc = (v) => encodeURIComponent(v).replace(/%2F/gi, '/').replace(/%3A/gi, ':');
+  const q = [...url.searchParams].map(([k, v]) => `${enc(k)}=${enc(v)}`).join('&');
+  return `${url.origin}${url.pathname}${q ? `?${q}` : ''}${url.hash}`;
+}
