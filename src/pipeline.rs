@@ -1064,12 +1064,15 @@ pub fn articulate(
         .collect())
 }
 
-/// URDF of a result, with link geometry fitted to each part's canonical points.
+/// URDF of a result and its mesh files, with link geometry fitted to each part's
+/// canonical points (`io::urdf::export`; meshes named `mesh_dir/part_P.stl`).
 pub fn urdf(
     result: &crate::io::result::FitResult,
     seq: &crate::io::sequence::Sequence,
     name: &str,
-) -> crate::Result<String> {
+    geometry: crate::io::urdf::Geometry,
+    mesh_dir: &str,
+) -> crate::Result<crate::io::urdf::UrdfExport> {
     let c = result.canonical_frame;
     let pts = &seq
         .frames
@@ -1079,7 +1082,7 @@ pub fn urdf(
         })?
         .points;
     let part_points = crate::io::urdf::canonical_part_points(result, pts);
-    crate::io::urdf::to_urdf(result, &part_points, name)
+    crate::io::urdf::export(result, &part_points, name, geometry, mesh_dir)
 }
 
 #[cfg(test)]

@@ -313,6 +313,73 @@ fn bench_reports_a_sequence_with_its_joints_in_the_bar() {
 }
 
 #[test]
+fn the_urdf_comes_with_its_link_meshes_or_boxes() {
+    let dir = tmp("urdf");
+    let seq = synth_laptop(&dir, 4, 512);
+    let out = dir.join("r.json");
+    let fit = |urdf: &Path, geometry: &str| {
+        let (ok, _, err) = gsart(&[
+            "fit",
+            seq.to_str().unwrap(),
+            "--quality",
+            "fast",
+            "--parts",
+            "2..3",
+            "--out",
+            out.to_str().unwrap(),
+            "--urdf",
+            urdf.to_str().unwrap(),
+            "--urdf-geometry",
+            geometry,
+            "--quiet",
+        ]);
+        assert!(ok, "{err}");
+        err
+    };
+    let urdf = dir.join("lap.urdf");
+    let err = fit(&urdf, "hull");
+    let text = std::fs::read_to_string(&urdf).unwrap();
+    let parts = serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(&out).unwrap())
+        .unwrap()["parts"]
+        .as_u64()
+        .unwrap() as usize;
+    assert!(
+        err.contains(&format!("and {parts} link meshes in")),
+        "{err}"
+    );
+    for p in 0..parts {
+        let name = format!("lap_meshes/part_{p}.stl");
+        assert!(
+            text.contains(&format!("<mesh filename=\"{name}\"/>")),
+            "{text}"
+        );
+        // A binary STL: 80-byte header, a count, 50 bytes a triangle.
+        let stl = std::fs::read(dir.join(&name)).unwrap();
+        let n = u32::from_le_bytes(stl[80..84].try_into().unwrap()) as usize;
+        assert!(
+            n >= 4 && stl.len() == 84 + 50 * n,
+            "{name}: {} bytes, {n} triangles",
+            stl.len()
+        );
+    }
+    assert!(!text.contains("<box"), "{text}");
+    let boxes = dir.join("boxes.urdf");
+    fit(&boxes, "box");
+    let text = std::fs::read_to_string(&boxes).unwrap();
+    assert_eq!(text.matches("<box size=").count(), 2 * parts, "{text}");
+    assert!(!dir.join("boxes_meshes").exists());
+    let (ok, _, err) = gsart(&[
+        "fit",
+        seq.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--urdf-geometry",
+        "ball",
+    ]);
+    assert!(!ok && err.contains("ball"), "{err}");
+}
+
+#[test]
 fn restarts_must_be_one_to_sixteen() {
     let dir = tmp("restarts");
     let out = dir.join("r.json");

@@ -1,7 +1,9 @@
 //! URDF export: the exported file parses (roxmltree), and forward kinematics of the
 //! URDF (composing joint origins and joint motions from the base link) equals the
 //! crate's `Chain` FK times each link's offset, for random states. With python3 and
-//! `yourdfpy` present, the same check runs through that standard URDF parser.
+//! `yourdfpy` present, the same check runs through that standard URDF parser, on the
+//! URDF with its link meshes (convex hulls, STL): every mesh loads, is closed, and its
+//! centre of mass and inertia as trimesh computes them are the URDF's `<inertial>`.
 
 mod kin_common;
 
@@ -10,9 +12,10 @@ use std::collections::HashMap;
 use glam::{DMat3, DMat4, DVec3};
 use gsart::geom::se3::to_row_major;
 use gsart::io::result::FitResult;
-use gsart::io::urdf::{canonical_part_points, joint_name, link_name, to_urdf};
+use gsart::io::urdf::{canonical_part_points, export, joint_name, link_name, to_urdf, Geometry};
 use gsart::kinematics::chain::Chain;
 use gsart::kinematics::{build_articulated, KinOptions};
+use gsart::math::Libm;
 use gsart::pipeline::Control;
 use kin_common::{load, sequences};
 use rand::{rngs::StdRng, Rng, SeedableRng};
@@ -194,6 +197,31 @@ fn urdf_fk_matches_chain_fk() {
     }
 }
 
+/// The largest |a[i] − b[i]|.
+fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+}
+
+/// What `tests/urdf_check.py` prints.
+#[derive(serde::Deserialize)]
+struct Read {
+    poses: HashMap<String, Vec<f64>>,
+    meshes: HashMap<String, MeshRead>,
+}
+
+#[derive(serde::Deserialize, Debug)]
+struct MeshRead {
+    volume: f64,
+    watertight: bool,
+    center_mass: Vec<f64>,
+    inertia: Vec<f64>,
+    inertial_origin: Vec<f64>,
+    mass: f64,
+    inertia_urdf: Vec<f64>,
+}
+
 #[test]
 fn urdf_loads_in_yourdfpy_with_matching_fk() {
     let ok = std::process::Command::new("python3")
@@ -220,9 +248,17 @@ fn urdf_loads_in_yourdfpy_with_matching_fk() {
     let mut rng = StdRng::seed_from_u64(9);
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/urdf_check.py");
     for (name, res, pts) in rs {
-        let text = to_urdf(&res, &pts, &name).unwrap();
+        let mesh_dir = format!("{name}_meshes");
+        let files = export(&res, &pts, &name, Geometry::Hull, &mesh_dir).unwrap();
         let urdf = dir.join(format!("{name}.urdf"));
-        std::fs::write(&urdf, &text).unwrap();
+        std::fs::write(&urdf, &files.urdf).unwrap();
+        std::fs::create_dir_all(dir.join(&mesh_dir)).unwrap();
+        for m in &files.meshes {
+            std::fs::write(dir.join(&m.path), &m.bytes).unwrap();
+        }
+        // Every part with points spanning a volume has its hull.
+        let solid = pts.iter().filter(|p| p.len() >= 4).count();
+        assert_eq!(files.meshes.len(), solid, "{name}: a mesh per part");
         let q = random_states(&res, &mut rng);
         let named: HashMap<String, f64> = res
             .joints
@@ -244,7 +280,33 @@ fn urdf_loads_in_yourdfpy_with_matching_fk() {
             "{name}: {}",
             String::from_utf8_lossy(&out.stderr)
         );
-        let poses: HashMap<String, Vec<f64>> = serde_json::from_slice(&out.stdout).unwrap();
+        let read: Read = serde_json::from_slice(&out.stdout).unwrap();
+        let poses = read.poses;
+        assert_eq!(
+            read.meshes.len(),
+            files.meshes.len(),
+            "{name}: yourdfpy loads every mesh"
+        );
+        for (link, m) in &read.meshes {
+            assert!(m.watertight && m.volume > 0.0, "{name} {link}: {m:?}");
+            assert_eq!(m.mass, 1.0);
+            let size = m.volume.lcbrt();
+            let com = max_abs_diff(&m.center_mass, &m.inertial_origin);
+            assert!(
+                com < 1e-5 * size,
+                "{name} {link}: centre of mass {:?} against {:?}",
+                m.center_mass,
+                m.inertial_origin
+            );
+            let scale = m.inertia.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+            let di = max_abs_diff(&m.inertia, &m.inertia_urdf);
+            assert!(
+                di < 1e-4 * scale,
+                "{name} {link}: inertia {:?} against {:?}",
+                m.inertia,
+                m.inertia_urdf
+            );
+        }
         let chain = Chain::from_result(&res).unwrap();
         let exp = expected(&res, &chain, &q);
         let root = res.tree.as_ref().unwrap().root;
@@ -252,11 +314,7 @@ fn urdf_loads_in_yourdfpy_with_matching_fk() {
         for (p, e) in exp.iter().enumerate() {
             let g = &poses[&link_name(p)];
             let m = to_row_major(&(exp[root].inverse() * *e));
-            worst = worst.max(
-                m.iter()
-                    .zip(g)
-                    .fold(0.0f64, |a, (x, y)| a.max((x - y).abs())),
-            );
+            worst = worst.max(max_abs_diff(&m, g));
         }
         eprintln!("{name}: yourdfpy max |URDF FK − Chain FK| = {worst:.2e}");
         assert!(worst < 1e-6, "{name}: {worst}");

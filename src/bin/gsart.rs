@@ -12,6 +12,7 @@ mod cli {
     use gsart::io::gt::GroundTruth;
     use gsart::io::result::FitResult;
     use gsart::io::sequence::{gt_path, Sequence};
+    use gsart::io::urdf::Geometry;
     use gsart::pipeline::{self, Control, FitOptions, Occlusion, Progress, Quality, Stage};
     use gsart::{Error, Result};
 
@@ -69,9 +70,15 @@ mod cli {
             /// Also write the segmented frames (PLY with `part`) into this folder.
             #[arg(long)]
             ply_out: Option<PathBuf>,
-            /// Also write a URDF of the recovered model.
+            /// Also write a URDF of the recovered model. With hull geometry its link
+            /// meshes (binary STL) go into a folder beside it, named after it
+            /// (`model.urdf` → `model_meshes/`).
             #[arg(long)]
             urdf: Option<PathBuf>,
+            /// The URDF links' geometry: each part's convex hull as a mesh, with the
+            /// solid hull's inertia, or a bounding box (one file, no meshes).
+            #[arg(long, default_value = "hull", value_parser = ["hull", "box"])]
+            urdf_geometry: String,
             /// Also write Steps 2–3's report (merges, pair costs, root, tree, joint
             /// residuals, refinement, timings) as JSON, to see why a tree came out as it did.
             #[arg(long)]
@@ -168,6 +175,7 @@ mod cli {
                 working_size,
                 ply_out,
                 urdf,
+                urdf_geometry,
                 report,
                 quiet,
             } => parse_options(
@@ -189,7 +197,14 @@ mod cli {
                     &out,
                     &opts,
                     ply_out.as_deref(),
-                    urdf.as_deref(),
+                    urdf.as_deref().map(|p| {
+                        let g = if urdf_geometry == "box" {
+                            Geometry::Box
+                        } else {
+                            Geometry::Hull
+                        };
+                        (p, g)
+                    }),
                     report.as_deref(),
                     quiet,
                 )
@@ -644,13 +659,13 @@ mod cli {
         out: &Path,
         opts: &FitOptions,
         ply_out: Option<&Path>,
-        urdf: Option<&Path>,
+        urdf: Option<(&Path, Geometry)>,
         report: Option<&Path>,
         quiet: bool,
     ) -> Result<()> {
         let t0 = Instant::now();
         check_writable("--out", out)?;
-        for (flag, path) in [("--urdf", urdf), ("--report", report)] {
+        for (flag, path) in [("--urdf", urdf.map(|u| u.0)), ("--report", report)] {
             if let Some(p) = path {
                 check_writable(flag, p)?;
             }
@@ -710,14 +725,50 @@ mod cli {
             write_text(path, &text)?;
             eprintln!("wrote {}", path.display());
         }
-        if let Some(path) = urdf {
-            let text = pipeline::urdf(result, &seq, "gsart_model")?;
-            write_text(path, &text)?;
-            eprintln!("wrote {}", path.display());
+        if let Some((path, geometry)) = urdf {
+            write_urdf(result, &seq, path, geometry)?;
         }
         if let Some(gt) = gt {
             let m = pipeline::evaluate(result, &seq, &gt)?;
             eprintln!("metrics: {}", m.summary());
+        }
+        Ok(())
+    }
+
+    /// The URDF at `path` and, with hull geometry, its meshes in `STEM_meshes/` beside it.
+    fn write_urdf(
+        result: &FitResult,
+        seq: &Sequence,
+        path: &Path,
+        geometry: Geometry,
+    ) -> Result<()> {
+        let stem = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_else(|| "model".into());
+        let mesh_dir = format!("{stem}_meshes");
+        let export = pipeline::urdf(result, seq, "gsart_model", geometry, &mesh_dir)?;
+        let folder = path.parent().unwrap_or(Path::new(""));
+        if !export.meshes.is_empty() {
+            let dir = folder.join(&mesh_dir);
+            std::fs::create_dir_all(&dir)
+                .map_err(|e| Error::io(format!("{} (--urdf meshes)", dir.display()), e))?;
+        }
+        for mesh in &export.meshes {
+            let file = folder.join(&mesh.path);
+            std::fs::write(&file, &mesh.bytes)
+                .map_err(|e| Error::io(file.display().to_string(), e))?;
+        }
+        write_text(path, &export.urdf)?;
+        if export.meshes.is_empty() {
+            eprintln!("wrote {}", path.display());
+        } else {
+            eprintln!(
+                "wrote {} and {} link meshes in {}",
+                path.display(),
+                export.meshes.len(),
+                folder.join(&mesh_dir).display()
+            );
         }
         Ok(())
     }

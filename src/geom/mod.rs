@@ -5,6 +5,7 @@ pub mod assignment;
 pub mod camera;
 pub mod cap_mask;
 pub mod fps;
+pub mod hull;
 pub mod knn;
 pub mod layers;
 pub mod se3;

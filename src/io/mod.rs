@@ -5,4 +5,5 @@ pub mod gt;
 pub mod ply;
 pub mod result;
 pub mod sequence;
+pub mod stl;
 pub mod urdf;

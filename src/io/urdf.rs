@@ -4,9 +4,14 @@
 //! (the root link at the world origin) with the world orientation of the canonical
 //! frame c, so joint `<origin>`s are pure translations between pivots and `<axis>` is
 //! the world axis; the model's zero configuration is the canonical frame (the root
-//! motion is not part of a URDF). Geometry: a `<box>` fitted to the part's canonical
-//! points by a PCA-oriented bounding box (no mesh files needed), used for `<visual>` and
-//! `<collision>`, with the box's inertia at unit density-free mass 1 (`<inertial>`).
+//! motion is not part of a URDF). Geometry, for `<visual>` and `<collision>`:
+//! - [`Geometry::Hull`] (the default): the convex hull of the part's canonical points
+//!   as a binary STL mesh file ([`crate::geom::hull`], [`crate::io::stl`]), named by a
+//!   path relative to the URDF; `<inertial>` is the solid hull's at mass 1 (centre of
+//!   mass and full inertia tensor), which a simulator can use as it is;
+//! - [`Geometry::Box`]: a `<box>` fitted to the points by a PCA-oriented bounding box,
+//!   one file with no meshes, the box's inertia at mass 1. A part whose points span no
+//!   volume (flat, or fewer than four) gets its box with either choice.
 //!
 //! FK of the URDF (origin · joint motion composed from the root) equals the crate's
 //! [`crate::kinematics::chain::Chain`] FK times the link offset `Tr(pivot)`; the tests
@@ -18,14 +23,40 @@ use std::fmt::Write;
 use glam::{DMat3, DVec3, Vec3};
 use nalgebra::{Matrix3, SymmetricEigen};
 
+use crate::geom::hull::convex_hull;
 use crate::io::gt::JointType;
 use crate::io::result::FitResult;
+use crate::io::stl::binary_stl;
 
 /// Smallest box side written (a flat or single-point part still gets a valid box).
 const MIN_SIDE: f64 = 1e-3;
 /// `<limit>` effort and velocity (URDF requires them; the fit knows nothing of dynamics).
 const EFFORT: f64 = 100.0;
 const VELOCITY: f64 = 1.0;
+
+/// A link's geometry in the URDF export.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Geometry {
+    /// The convex hull of the part's points, as a mesh file.
+    #[default]
+    Hull,
+    /// A bounding box (`<box>`): one URDF file, no meshes.
+    Box,
+}
+
+/// A mesh file the URDF names: its path relative to the URDF's folder, and its bytes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeshFile {
+    pub path: String,
+    pub bytes: Vec<u8>,
+}
+
+/// A URDF and the mesh files it names (none with [`Geometry::Box`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct UrdfExport {
+    pub urdf: String,
+    pub meshes: Vec<MeshFile>,
+}
 
 /// An oriented bounding box: centre, orientation (columns = box axes, right-handed)
 /// and full side lengths.
@@ -110,9 +141,22 @@ pub fn joint_name(p: usize) -> String {
     format!("joint_{p}")
 }
 
-/// The URDF of `result` (which needs a tree and joints). `part_points[p]`: part p's
-/// points at the canonical frame (world coordinates) for its box; `name`: robot name.
+/// The URDF of `result` with boxes for geometry (one file), see [`export`].
 pub fn to_urdf(result: &FitResult, part_points: &[Vec<Vec3>], name: &str) -> crate::Result<String> {
+    Ok(export(result, part_points, name, Geometry::Box, "")?.urdf)
+}
+
+/// The URDF of `result` (which needs a tree and joints) and its mesh files.
+/// `part_points[p]`: part p's points at the canonical frame (world coordinates) for its
+/// geometry; `name`: robot name; `mesh_dir`: the folder of the mesh files, relative to
+/// the URDF's (their paths are `mesh_dir/part_P.stl`).
+pub fn export(
+    result: &FitResult,
+    part_points: &[Vec<Vec3>],
+    name: &str,
+    geometry: Geometry,
+    mesh_dir: &str,
+) -> crate::Result<UrdfExport> {
     let bad = |s: String| crate::Error::InvalidArgument(format!("URDF export: {s}"));
     let tree = result
         .tree
@@ -141,12 +185,47 @@ pub fn to_urdf(result: &FitResult, part_points: &[Vec<Vec3>], name: &str) -> cra
         joint_of[j.child] = Some(j);
     }
     let mut s = String::new();
+    let mut meshes = Vec::new();
     // Writing to a String cannot fail.
     let _ = writeln!(s, "<?xml version=\"1.0\"?>");
     let _ = writeln!(s, "<robot name=\"{}\">", esc(name));
     for (p, &o) in origin.iter().enumerate() {
         let _ = writeln!(s, "  <link name=\"{}\">", link_name(p));
-        if let Some(b) = part_points.get(p).and_then(|pts| oriented_box(pts)) {
+        let pts = part_points.get(p).map(|v| v.as_slice()).unwrap_or(&[]);
+        let hull = match geometry {
+            Geometry::Hull => convex_hull(pts).and_then(|h| Some((h.mass_properties()?, h))),
+            Geometry::Box => None,
+        };
+        if let Some((mass, hull)) = hull {
+            let path = if mesh_dir.is_empty() {
+                format!("{}.stl", link_name(p))
+            } else {
+                format!("{}/{}.stl", mesh_dir.trim_end_matches('/'), link_name(p))
+            };
+            let i = mass.inertia;
+            let _ = writeln!(
+                s,
+                "    <inertial>\n      <origin xyz=\"{}\" rpy=\"0 0 0\"/>\n      <mass value=\"1\"/>\n      <inertia ixx=\"{}\" ixy=\"{}\" ixz=\"{}\" iyy=\"{}\" iyz=\"{}\" izz=\"{}\"/>\n    </inertial>",
+                v(mass.center - o),
+                i.x_axis.x,
+                i.y_axis.x,
+                i.z_axis.x,
+                i.y_axis.y,
+                i.z_axis.y,
+                i.z_axis.z
+            );
+            for tag in ["visual", "collision"] {
+                let _ = writeln!(
+                    s,
+                    "    <{tag}>\n      <origin xyz=\"0 0 0\" rpy=\"0 0 0\"/>\n      <geometry>\n        <mesh filename=\"{}\"/>\n      </geometry>\n    </{tag}>",
+                    esc(&path)
+                );
+            }
+            meshes.push(MeshFile {
+                path,
+                bytes: binary_stl(&hull.vertices, &hull.triangles, -o),
+            });
+        } else if let Some(b) = oriented_box(pts) {
             let xyz = v(b.center - o);
             let r = v(rpy(&b.rotation));
             let size = v(b.size);
@@ -208,7 +287,7 @@ pub fn to_urdf(result: &FitResult, part_points: &[Vec<Vec3>], name: &str) -> cra
         }
     }
     let _ = writeln!(s, "</robot>");
-    Ok(s)
+    Ok(UrdfExport { urdf: s, meshes })
 }
 
 /// Canonical-frame points of each part from a result and the working points of its

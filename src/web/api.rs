@@ -736,15 +736,45 @@ impl Model {
         }
     }
 
-    /// URDF of the model: one link per part (a box around its canonical points),
-    /// joints with axis, origin and limits.
-    pub fn urdf(&self, name: &str) -> Result<String, JsError> {
+    /// URDF of the model and its files, as `[{name, bytes}]` (the URDF first, named
+    /// `NAME.urdf`): one link per part with its convex hull as a mesh in `NAME_meshes/`
+    /// (`geometry` "hull") or a bounding box ("box", the URDF alone); joints with axis,
+    /// origin and limits.
+    pub fn urdf_files(&self, name: &str, geometry: &str) -> Result<Array, JsError> {
         let (points, src) = self.source(self.result.canonical_frame)?;
         if src != self.result.canonical_frame {
             return Err(JsError::new("internal: canonical points missing"));
         }
+        let geometry = match geometry {
+            "hull" => crate::io::urdf::Geometry::Hull,
+            "box" => crate::io::urdf::Geometry::Box,
+            other => {
+                return Err(JsError::new(&format!(
+                    "URDF geometry {other:?}: use \"hull\" or \"box\""
+                )))
+            }
+        };
         let parts = crate::io::urdf::canonical_part_points(&self.result, points);
-        crate::io::urdf::to_urdf(&self.result, &parts, name).map_err(js_err)
+        let export = crate::io::urdf::export(
+            &self.result,
+            &parts,
+            name,
+            geometry,
+            &format!("{name}_meshes"),
+        )
+        .map_err(js_err)?;
+        let files = Array::new();
+        let file = |path: &str, bytes: &[u8]| {
+            let o = Object::new();
+            set(&o, "name", &JsValue::from_str(path));
+            set(&o, "bytes", &Uint8Array::from(bytes));
+            o
+        };
+        files.push(&file(&format!("{name}.urdf"), export.urdf.as_bytes()));
+        for m in &export.meshes {
+            files.push(&file(&m.path, &m.bytes));
+        }
+        Ok(files)
     }
 
     /// Frame k as a binary PLY with `x y z part` (the input points when loaded, else the

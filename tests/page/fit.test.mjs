@@ -11,8 +11,8 @@ import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import fs from 'node:fs';
 import path from 'node:path';
-import { execFileSync } from 'node:child_process';
-import { startServer, launch, newPage, waitLoaded, canvasStats, canvasPng, pixelDiff, shot, ARTIFACTS, ROOT, benchDev } from './helpers.mjs';
+import { execFileSync, spawnSync } from 'node:child_process';
+import { startServer, launch, newPage, waitLoaded, canvasStats, canvasPng, pixelDiff, shot, ARTIFACTS, ROOT, benchDev, unzipStored } from './helpers.mjs';
 
 let srv, browser;
 before(async () => { srv = await startServer(); browser = await launch(); });
@@ -146,8 +146,30 @@ test('fit an example end to end (fast), explore, re-pose, export', { timeout: FI
   const zip = fs.readFileSync(zipFile);
   assert.equal(zip.subarray(0, 2).toString(), 'PK');
   assert.ok(zip.includes(Buffer.from('property int part')), 'segmented PLY frames have a part property');
-  const urdf = fs.readFileSync(await download(page, '#btn-export-urdf'), 'utf8');
-  assert.match(urdf, /<robot[\s\S]*<joint[\s\S]*<axis/);
+  // The URDF comes in a zip with each link's convex hull as an STL mesh.
+  const urdfZip = await download(page, '#btn-export-urdf');
+  assert.match(path.basename(urdfZip), /laptop_urdf\.zip$/);
+  const entries = unzipStored(fs.readFileSync(urdfZip));
+  const urdf = entries.find((e) => e.name === 'laptop.urdf')?.bytes.toString('utf8');
+  assert.match(urdf ?? '', /<robot[\s\S]*<joint[\s\S]*<axis/);
+  const meshes = entries.filter((e) => /^laptop_meshes\/part_\d+\.stl$/.test(e.name));
+  assert.equal(meshes.length, json.parts, 'a mesh per part');
+  for (const m of meshes) assert.ok(urdf.includes(`<mesh filename="${m.name}"/>`), m.name);
+  // yourdfpy (a standard parser, with trimesh) loads the URDF and every mesh.
+  const dir = fs.mkdtempSync(path.join(ARTIFACTS, 'urdf-'));
+  for (const e of entries) {
+    fs.mkdirSync(path.dirname(path.join(dir, e.name)), { recursive: true });
+    fs.writeFileSync(path.join(dir, e.name), e.bytes);
+  }
+  fs.writeFileSync(path.join(dir, 'states.json'), '{}');
+  const check = spawnSync('python3', [path.join(ROOT, 'tests', 'urdf_check.py'), path.join(dir, 'laptop.urdf'), path.join(dir, 'states.json')], { encoding: 'utf8' });
+  if (check.status === 3 && !process.env.CI) console.log('# yourdfpy not installed: the URDF was not loaded');
+  else {
+    assert.equal(check.status, 0, check.stderr);
+    const read = JSON.parse(check.stdout);
+    assert.equal(Object.keys(read.meshes).length, json.parts);
+    for (const m of Object.values(read.meshes)) assert.ok(m.watertight && m.volume > 0, JSON.stringify(m));
+  }
   assert.deepEqual(errors, []);
   await context.close();
 });

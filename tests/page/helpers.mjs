@@ -121,3 +121,21 @@ export async function shot(page, name) {
   await page.screenshot({ path: file });
   return file;
 }
+
+/** The entries of a stored (uncompressed) zip, as the page writes them: [{name, bytes}]. */
+export function unzipStored(buf) {
+  const out = [];
+  let o = 0;
+  while (o + 30 <= buf.length && buf.readUInt32LE(o) === 0x04034b50) {
+    const method = buf.readUInt16LE(o + 8);
+    if (method !== 0) throw new Error(`zip entry at ${o}: method ${method}, not stored`);
+    const size = buf.readUInt32LE(o + 18);
+    const nameLen = buf.readUInt16LE(o + 26);
+    const extraLen = buf.readUInt16LE(o + 28);
+    const name = buf.subarray(o + 30, o + 30 + nameLen).toString('utf8');
+    const start = o + 30 + nameLen + extraLen;
+    out.push({ name, bytes: buf.subarray(start, start + size) });
+    o = start + size;
+  }
+  return out;
+}

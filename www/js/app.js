@@ -1108,10 +1108,12 @@ function exportPly() {
   else download(zip(files), `${exportName()}_segmented_ply.zip`);
 }
 
+/** The URDF and its link meshes (each part's convex hull, binary STL) in one zip. */
 function exportUrdf() {
   if (!S.model) return;
   try {
-    download(new Blob([S.model.urdf(exportName())], { type: 'application/xml' }), `${exportName()}.urdf`);
+    const files = Array.from(S.model.urdf_files(exportName(), 'hull'));
+    download(zip(files), `${exportName()}_urdf.zip`);
   } catch (e) { toast(errText(e), 'error', 8000); }
 }
 
