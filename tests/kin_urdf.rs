@@ -12,7 +12,7 @@ use std::collections::HashMap;
 use glam::{DMat3, DMat4, DVec3};
 use gsart::geom::se3::to_row_major;
 use gsart::io::result::FitResult;
-use gsart::io::urdf::{canonical_part_points, export, joint_name, link_name, to_urdf, Geometry};
+use gsart::io::urdf::{canonical_part_points, export, joint_name, link_name, Geometry};
 use gsart::kinematics::chain::Chain;
 use gsart::kinematics::{build_articulated, KinOptions};
 use gsart::math::Libm;
@@ -171,7 +171,7 @@ fn urdf_fk_matches_chain_fk() {
     }
     let mut rng = StdRng::seed_from_u64(7);
     for (name, res, pts) in rs {
-        let text = to_urdf(&res, &pts, &name).unwrap();
+        let text = export(&res, &pts, &name, Geometry::Box, "").unwrap().urdf;
         let chain = Chain::from_result(&res).unwrap();
         let mut worst: f64 = 0.0;
         for _ in 0..10 {

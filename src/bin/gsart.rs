@@ -191,20 +191,14 @@ mod cli {
                 medial_init,
                 ..opts
             })
-            .and_then(|opts| {
+            .and_then(|opts| Ok((opts, urdf_geometry.parse::<Geometry>()?)))
+            .and_then(|(opts, geometry)| {
                 fit(
                     &input,
                     &out,
                     &opts,
                     ply_out.as_deref(),
-                    urdf.as_deref().map(|p| {
-                        let g = if urdf_geometry == "box" {
-                            Geometry::Box
-                        } else {
-                            Geometry::Hull
-                        };
-                        (p, g)
-                    }),
+                    urdf.as_deref().map(|p| (p, geometry)),
                     report.as_deref(),
                     quiet,
                 )

@@ -44,6 +44,21 @@ pub enum Geometry {
     Box,
 }
 
+impl std::str::FromStr for Geometry {
+    type Err = crate::Error;
+
+    /// "hull" or "box", as the CLI's `--urdf-geometry` and the page name them.
+    fn from_str(s: &str) -> crate::Result<Geometry> {
+        match s {
+            "hull" => Ok(Geometry::Hull),
+            "box" => Ok(Geometry::Box),
+            other => Err(crate::Error::InvalidArgument(format!(
+                "URDF geometry {other:?}: use \"hull\" or \"box\""
+            ))),
+        }
+    }
+}
+
 /// A mesh file the URDF names: its path relative to the URDF's folder, and its bytes.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MeshFile {
@@ -139,11 +154,6 @@ pub fn link_name(p: usize) -> String {
 /// Name of the joint whose child is part p.
 pub fn joint_name(p: usize) -> String {
     format!("joint_{p}")
-}
-
-/// The URDF of `result` with boxes for geometry (one file), see [`export`].
-pub fn to_urdf(result: &FitResult, part_points: &[Vec<Vec3>], name: &str) -> crate::Result<String> {
-    Ok(export(result, part_points, name, Geometry::Box, "")?.urdf)
 }
 
 /// The URDF of `result` (which needs a tree and joints) and its mesh files.

@@ -745,15 +745,7 @@ impl Model {
         if src != self.result.canonical_frame {
             return Err(JsError::new("internal: canonical points missing"));
         }
-        let geometry = match geometry {
-            "hull" => crate::io::urdf::Geometry::Hull,
-            "box" => crate::io::urdf::Geometry::Box,
-            other => {
-                return Err(JsError::new(&format!(
-                    "URDF geometry {other:?}: use \"hull\" or \"box\""
-                )))
-            }
-        };
+        let geometry: crate::io::urdf::Geometry = geometry.parse().map_err(js_err)?;
         let parts = crate::io::urdf::canonical_part_points(&self.result, points);
         let export = crate::io::urdf::export(
             &self.result,

@@ -99,21 +99,14 @@ async function startView() {
     badge.textContent = 'no 3D';
     badge.className = 'badge none';
     const neither = !navigator.gpu && !hasWebgl2();
-    const msg = $('view-message');
-    msg.replaceChildren();
-    const box = document.createElement('div');
-    box.className = 'box';
-    box.innerHTML = neither
-      ? '<h2>No WebGPU or WebGL2 here</h2><p>This browser offers neither WebGPU nor WebGL2, so the point clouds cannot be drawn. '
-        + 'Loading, fitting and exporting still work. Use a current Chrome, Edge, Firefox or Safari, or turn on hardware acceleration.</p>'
-      : '<h2>The 3D view could not start</h2><p>Loading, fitting and exporting still work; only the drawing is missing.</p>';
+    const box = neither
+      ? viewMessage('No WebGPU or WebGL2 here', 'This browser offers neither WebGPU nor WebGL2, so the point clouds cannot be drawn. '
+        + 'Loading, fitting and exporting still work. Use a current Chrome, Edge, Firefox or Safari, or turn on hardware acceleration.')
+      : viewMessage('The 3D view could not start', 'Loading, fitting and exporting still work; only the drawing is missing.');
     const detail = document.createElement('p');
     detail.className = 'muted small';
     detail.textContent = errText(e);
     box.appendChild(detail);
-    msg.appendChild(box);
-    msg.hidden = false;
-    $('empty-hint').hidden = true;
     console.warn('3D view unavailable:', e);
     return;
   }
@@ -126,7 +119,7 @@ async function startView() {
   S.view.setGaussiansVisible(S.gaussiansOn);
 }
 
-/** A message over the 3D view: a title and a line of text (both plain text). */
+/** A message over the 3D view: a title and a line of text (both plain text); its box. */
 function viewMessage(title, text) {
   const box = document.createElement('div');
   box.className = 'box';
@@ -138,6 +131,7 @@ function viewMessage(title, text) {
   $('view-message').replaceChildren(box);
   $('view-message').hidden = false;
   $('empty-hint').hidden = true;
+  return box;
 }
 
 function hasWebgl2() {
@@ -1354,11 +1348,11 @@ function applyUrlSettings() {
   if (values.restarts) $('restarts').value = String(values.restarts);
   if (values.medial_init !== undefined) $('medial-init').checked = values.medial_init;
   if (values.parts) {
-    $('parts-auto').checked = false;
     $('parts-min').value = String(values.parts[0]);
     $('parts-max').value = String(values.parts[1]);
-    $('parts-min').disabled = false;
-    $('parts-max').disabled = false;
+    // The checkbox's own handler enables the two fields.
+    $('parts-auto').checked = false;
+    $('parts-auto').dispatchEvent(new Event('change'));
   }
   if (problems.length) toast(`Ignored in the link: ${problems.join('; ')}.`, 'error', 9000);
 }
