@@ -146,6 +146,14 @@ impl OrbitCamera {
         self.pitch = (self.pitch + dy * ORBIT_SPEED).clamp(-MAX_PITCH, MAX_PITCH);
     }
 
+    /// Turn the camera about the up axis by `radians` (a turntable; the video export
+    /// turns it once around in equal steps).
+    pub fn turn(&mut self, radians: f32) {
+        if radians.is_finite() {
+            self.yaw = (self.yaw + radians).rem_euclid(std::f32::consts::TAU);
+        }
+    }
+
     /// World units per CSS pixel at the target's depth.
     pub fn world_per_pixel(&self) -> f32 {
         2.0 * self.distance * (self.fov_y * 0.5).ltan() / self.viewport[1].max(1.0)
@@ -462,6 +470,17 @@ mod tests {
             (cam.eye().length() - 2.0).abs() < 1e-4,
             "orbit keeps distance"
         );
+        let before = (cam.eye(), cam.target);
+        cam.turn(0.7);
+        cam.turn(std::f32::consts::TAU - 0.7);
+        assert!(
+            (cam.eye() - before.0).length() < 1e-4,
+            "a whole turn comes back"
+        );
+        cam.turn(std::f32::consts::FRAC_PI_2);
+        assert!((cam.eye() - before.0).length() > 1.0 && cam.target == before.1);
+        cam.turn(f32::NAN);
+        assert!(cam.eye().is_finite());
         cam.orbit(0.0, 1e6);
         assert!(cam.pitch <= MAX_PITCH);
 

@@ -519,6 +519,64 @@ pub fn generate_example(name: &str, seed: u64) -> Result<JsValue, JsError> {
     Ok(o.into())
 }
 
+/// The video file of frames encoded by WebCodecs' `VideoEncoder` (`codec` its codec
+/// string): MP4 for H.264 (`description`: the encoder's `decoderConfig.description`, the
+/// avcC record), WebM for VP8 and VP9 (`description` unused). Frame i is
+/// `data[offsets[i]..offsets[i + 1]]`, shown from `timestamps_us[i]`, a key frame where
+/// `keys[i]` is 1; the video lasts `duration_us`. See `io::video`.
+#[allow(clippy::too_many_arguments)]
+#[wasm_bindgen]
+pub fn video_file(
+    codec: &str,
+    description: &[u8],
+    width: u32,
+    height: u32,
+    timestamps_us: &[f64],
+    keys: &[u8],
+    offsets: &[u32],
+    data: &[u8],
+    duration_us: f64,
+) -> Result<Vec<u8>, JsError> {
+    use crate::io::video::{mp4, webm, Codec, EncodedFrame, VideoTrack};
+    let n = timestamps_us.len();
+    if keys.len() != n || offsets.len() != n + 1 {
+        return Err(JsError::new(&format!(
+            "video: {n} frame times, {} key flags and {} offsets",
+            keys.len(),
+            offsets.len()
+        )));
+    }
+    let us = |t: f64| {
+        if t.is_finite() && t > 0.0 {
+            t.round() as u64
+        } else {
+            0
+        }
+    };
+    let mut frames = Vec::with_capacity(n);
+    for i in 0..n {
+        let (a, b) = (offsets[i] as usize, offsets[i + 1] as usize);
+        let bytes = data
+            .get(a..b)
+            .ok_or_else(|| JsError::new(&format!("video: frame {i} lies outside the data")))?;
+        frames.push(EncodedFrame {
+            timestamp_us: us(timestamps_us[i]),
+            key: keys[i] != 0,
+            data: bytes,
+        });
+    }
+    let track = VideoTrack {
+        codec: Codec::from_webcodecs(codec).map_err(js_err)?,
+        width,
+        height,
+    };
+    match track.codec {
+        Codec::H264 => mp4::mux(track, description, &frames, us(duration_us)),
+        Codec::Vp8 | Codec::Vp9 => webm::mux(track, &frames, us(duration_us)),
+    }
+    .map_err(js_err)
+}
+
 // ------------------------------------------------------------------ the model
 
 /// A result opened for viewing: re-posing through the core's forward kinematics

@@ -184,6 +184,11 @@ impl Viewer {
         self.inner.borrow_mut().camera.orbit(dx, dy);
     }
 
+    /// Turn the camera about the up axis by `radians` (turntable).
+    pub fn turn(&self, radians: f32) {
+        self.inner.borrow_mut().camera.turn(radians);
+    }
+
     /// Pan as if dragged by (dx, dy) CSS pixels.
     pub fn pan(&self, dx: f32, dy: f32) {
         self.inner.borrow_mut().camera.pan(dx, dy);
