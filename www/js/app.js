@@ -8,6 +8,7 @@ import { entriesFromDrop, entriesFromInput, classify, basename } from './files.j
 import { LossChart } from './chart.js';
 import { drawTree } from './tree.js';
 import { download, zip } from './save.js';
+import { FPS, recordVideo, sweep, videoSize, VideoUnsupported } from './video.js';
 import { EMBED, setupEmbed, syncEmbed, withoutEmbed, iframeCode, readableUrl } from './embed.js';
 import { DEFAULTS, SETTING_KEYS, settingsFromParams, writeSettings, exampleSeed } from './settings.js';
 
@@ -46,6 +47,7 @@ const S = {
   // finish beside the best (`FitJob.movedRunner`).
   movedRunners: [],
   resultExtra: {}, // what the result on view was opened with (openResult's `extra`)
+  video: null, // the AbortController of a video being recorded
 };
 
 // ------------------------------------------------------------------ helpers
@@ -152,6 +154,7 @@ function applyHashCamera() {
 // ------------------------------------------------------------------ loading
 
 function resetResult() {
+  S.video?.abort();
   stopPlay();
   if (S.model) { try { S.model.free(); } catch { /* already freed */ } }
   S.model = null;
@@ -1118,6 +1121,83 @@ async function exportPng() {
   else toast('The screenshot could not be encoded.', 'error');
 }
 
+// Seconds per joint ("each joint in turn"), for the whole cycle ("all joints together"),
+// and per input frame ("the frames", as Play shows them).
+const VIDEO_JOINT_S = 2, VIDEO_TOGETHER_S = 4, VIDEO_FRAME_S = 0.4;
+
+/**
+ * A video of the view (MP4 or WebM): the joints swept through their ranges (one at a
+ * time, or all at once) from the pose on view, or the frames as Play shows them;
+ * optionally with the camera turning once around. Afterwards the pose, frame and camera
+ * are put back.
+ */
+async function exportVideo() {
+  if (S.video) { S.video.abort(); return; }
+  if (!S.model || !S.view) return;
+  const mode = $('video-mode').value, format = $('video-format').value;
+  const joints = S.model.joints();
+  if (mode !== 'frames' && !joints.length) { toast('This model has no joints to move: choose "The frames".', 'error', 6000); return; }
+  stopPlay();
+  const saved = { current: S.current, states: S.states?.slice(), cam: S.view.cameraState() };
+  const base = S.states?.slice() ?? [];
+  let frames, pose;
+  if (mode === 'frames') {
+    const per = Math.round(VIDEO_FRAME_S * FPS);
+    frames = S.model.frames() * per;
+    pose = (i) => { const k = Math.floor(i / per); if (k !== S.current || i === 0) showFrame(k); return k; };
+  } else {
+    const paths = joints.map((j) => ({ child: j.child, q: sweep(base[j.child], j.limits) }));
+    const per = Math.round((mode === 'joints' ? VIDEO_JOINT_S : VIDEO_TOGETHER_S) * FPS);
+    frames = mode === 'joints' ? per * joints.length : per;
+    pose = (i) => {
+      const u = (i % per) / per;
+      S.states = base.slice();
+      for (const [n, p] of paths.entries()) if (mode === 'together' || n === Math.floor(i / per)) S.states[p.child] = p.q(u);
+      syncSliders();
+      drawModel();
+      return i;
+    };
+  }
+  const dpr = window.devicePixelRatio || 1;
+  const [width, height] = videoSize(Math.round(S.view.canvas.clientWidth * dpr), Math.round(S.view.canvas.clientHeight * dpr));
+  const ctl = new AbortController();
+  S.video = ctl;
+  document.body.classList.add('recording');
+  const btn = $('btn-export-video'), status = $('video-status');
+  btn.textContent = 'Cancel video';
+  status.hidden = false;
+  const secs = (frames / FPS).toFixed(1);
+  status.textContent = `Recording ${secs} s at ${width} × ${height}…`;
+  const model = S.model;
+  try {
+    const blob = await recordVideo({
+      wasm, viewer: S.view.viewer, format, width, height, frames, pose,
+      turn: $('video-turn').checked ? (2 * Math.PI) / frames : 0,
+      signal: ctl.signal,
+      onProgress: (done, total) => { status.textContent = `Recording ${secs} s at ${width} × ${height}: ${Math.floor((100 * done) / total)} %`; },
+    });
+    download(blob, `${exportName()}_${mode}.${format}`);
+    status.textContent = `Saved a ${secs} s video, ${width} × ${height}, ${(blob.size / 1e6).toFixed(1)} MB.`;
+  } catch (e) {
+    if (e?.name === 'AbortError') status.textContent = 'The video was cancelled.';
+    else {
+      status.textContent = e instanceof VideoUnsupported ? e.message : `The video failed: ${errText(e)}`;
+      if (!(e instanceof VideoUnsupported)) console.error(e);
+    }
+  } finally {
+    S.video = null;
+    document.body.classList.remove('recording');
+    btn.textContent = 'Save video';
+    // Put back what was on view: the camera, and the pose unless the model itself was
+    // replaced meanwhile.
+    S.view?.setCameraState(saved.cam);
+    if (S.model === model && S.view) {
+      showFrame(saved.current);
+      if (saved.states) { S.states = saved.states; syncSliders(); drawModel(); }
+    }
+  }
+}
+
 /**
  * The link that opens what is on view: `?model=URL` for a model opened from a URL (or
  * `model`, given), `?example=NAME` for an example (with `fit=1` when `fitted`), the
@@ -1256,6 +1336,7 @@ function wire() {
   $('btn-export-ply').addEventListener('click', exportPly);
   $('btn-export-urdf').addEventListener('click', exportUrdf);
   $('btn-export-png').addEventListener('click', exportPng);
+  $('btn-export-video').addEventListener('click', exportVideo);
   $('btn-share').addEventListener('click', copyLink);
   $('btn-embed').addEventListener('click', copyEmbed);
 
@@ -1265,6 +1346,8 @@ function wire() {
 
   window.addEventListener('keydown', (e) => {
     if (e.ctrlKey || e.metaKey || e.altKey) return;
+    // A recording video owns the view until it ends.
+    if (S.video) return;
     const t = e.target;
     const typing = t instanceof HTMLElement && (t.tagName === 'INPUT' || t.tagName === 'SELECT' || t.tagName === 'TEXTAREA' || t.isContentEditable);
     if (e.key === 'Escape') { toggleHelp(false); return; }
