@@ -1,7 +1,8 @@
 // Embed mode (`?embed=1`, www/js/embed.js): the page as an interactive figure in another
 // page's iframe. An example fitted in place shows only the view, the timeline and the
 // card (the fit's progress, then the joints' sliders); `play=1` plays the frames; a shared
-// model in a real iframe opens without scrolling its host page; errors show over the view;
+// model in a real iframe opens without scrolling its host page; `play=joints` and
+// `play=together` move the joints until a slider is touched; errors show over the view;
 // the full page's "Embed code" gives an iframe that opens the same model, or, for an
 // example fitted on the page, one that fits it again with the same settings to the same
 // result.
@@ -161,6 +162,38 @@ test('the full page gives the embed code of a shared model', { timeout: 120_000 
   await waitLoaded(page);
   await page.waitForSelector('#embed-card.has-result');
   assert.equal(await visible(page, '.panel'), false);
+  assert.deepEqual(errors, []);
+  await context.close();
+});
+
+test('play=joints and play=together move the joints in a figure until a slider is touched', { timeout: 120_000 }, async (t) => {
+  if (!modelJson) { t.skip('needs the fitted model of the first test'); return; }
+  const { page, errors, context } = await newPage(browser, { width: 640, height: 480 });
+  await serveModel(context, modelJson);
+  const statesOf = () => page.evaluate(() => Array.from(window.gsart.state.states));
+  for (const mode of ['joints', 'together']) {
+    await page.goto(`${srv.base}/?model=/shared/model.json&embed=1&play=${mode}`);
+    await waitLoaded(page);
+    await page.waitForSelector('#embed-card.has-result');
+    const frameStates = await page.evaluate(() => Array.from(window.gsart.state.frameStates));
+    assert.equal(await page.locator('#btn-play').getAttribute('aria-label'), 'Pause', `${mode} plays`);
+    const k = await page.evaluate(() => window.gsart.state.current);
+    // The states move through the joints' ranges; the frame stays.
+    const seen = [];
+    for (let i = 0; i < 6; i++) { await page.waitForTimeout(250); seen.push(await statesOf()); }
+    const child = await page.evaluate(() => window.gsart.state.model.joints()[0].child);
+    const values = new Set(seen.map((s) => s[child].toFixed(4)));
+    assert.ok(values.size >= 4, `${mode}: the first joint moves (${[...values]})`);
+    assert.ok(seen.some((s) => Math.abs(s[child] - frameStates[child]) > 0.05), `${mode}: away from the frame's state`);
+    assert.equal(await page.evaluate(() => window.gsart.state.current), k);
+    // A slider stops it where the slider puts it.
+    const slider = page.locator('#embed-card input[type=range]').first();
+    await slider.evaluate((el) => { el.value = el.min; el.dispatchEvent(new Event('input', { bubbles: true })); });
+    assert.equal(await page.locator('#btn-play').getAttribute('aria-label'), 'Play');
+    const held = await statesOf();
+    await page.waitForTimeout(400);
+    assert.deepEqual(await statesOf(), held, `${mode}: stopped`);
+  }
   assert.deepEqual(errors, []);
   await context.close();
 });

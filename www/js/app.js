@@ -8,7 +8,8 @@ import { entriesFromDrop, entriesFromInput, classify, basename } from './files.j
 import { LossChart } from './chart.js';
 import { drawTree } from './tree.js';
 import { download, zip } from './save.js';
-import { FPS, recordVideo, sweep, videoSize, VideoUnsupported } from './video.js';
+import { FPS, recordVideo, videoSize, VideoUnsupported } from './video.js';
+import { jointMotion } from './motion.js';
 import { EMBED, setupEmbed, syncEmbed, withoutEmbed, iframeCode, readableUrl } from './embed.js';
 import { DEFAULTS, SETTING_KEYS, settingsFromParams, writeSettings, exampleSeed } from './settings.js';
 
@@ -17,8 +18,11 @@ const ICON_PLAY = '<svg viewBox="0 0 24 24" width="16" height="16" aria-hidden="
 const ICON_PAUSE = '<svg viewBox="0 0 24 24" width="16" height="16" aria-hidden="true"><rect x="6" y="4.5" width="4" height="15" rx="1" fill="currentColor"/><rect x="14" y="4.5" width="4" height="15" rx="1" fill="currentColor"/></svg>';
 const params = new URLSearchParams(location.search);
 // `play=1` (a link's or a figure's option): the frames play once they are on view, and
-// again when a fit's model replaces them.
-const PLAY = params.get('play') === '1';
+// again when a fit's model replaces them. `play=joints` / `play=together` play the
+// model's joints instead (each in turn, or all at once: motion.js), and Play does too.
+const PLAY = { 1: 'frames', frames: 'frames', joints: 'joints', together: 'together' }[params.get('play')] ?? null;
+// Seconds per input frame when the frames play (and in the video of the frames).
+const FRAME_S = 0.4;
 
 const S = {
   view: null,
@@ -39,6 +43,7 @@ const S = {
   frameStates: null,
   playing: false,
   playTimer: null,
+  playRaf: 0, // the animation frame of joints playing (`play=joints`)
   gaussiansOn: true,
   hot: -1,
   palette: null,
@@ -444,17 +449,34 @@ function updateHud() {
 }
 
 function play() {
-  if (frameCount() < 2) return;
+  const joints = S.model && S.states && (PLAY === 'joints' || PLAY === 'together') ? S.model.joints() : [];
+  if (!joints.length && frameCount() < 2) return;
   S.playing = true;
   $('btn-play').innerHTML = ICON_PAUSE;
   $('btn-play').setAttribute('aria-label', 'Pause');
   clearInterval(S.playTimer);
-  S.playTimer = setInterval(() => showFrame(S.current + 1), 400);
+  cancelAnimationFrame(S.playRaf);
+  if (!joints.length) {
+    S.playTimer = setInterval(() => showFrame(S.current + 1), FRAME_S * 1000);
+    return;
+  }
+  // The joints, from the pose on view, by the clock (a slow machine skips, not slows).
+  const motion = jointMotion(joints, S.states.slice(), PLAY);
+  const t0 = performance.now();
+  const step = (now) => {
+    if (!S.playing || !S.model) return;
+    S.states = motion.at((now - t0) / 1000).states;
+    syncSliders();
+    drawModel();
+    S.playRaf = requestAnimationFrame(step);
+  };
+  S.playRaf = requestAnimationFrame(step);
 }
 
 function stopPlay() {
   S.playing = false;
   clearInterval(S.playTimer);
+  cancelAnimationFrame(S.playRaf);
   $('btn-play').innerHTML = ICON_PLAY;
   $('btn-play').setAttribute('aria-label', 'Play');
 }
@@ -1121,9 +1143,6 @@ async function exportPng() {
   else toast('The screenshot could not be encoded.', 'error');
 }
 
-// Seconds per joint ("each joint in turn"), for the whole cycle ("all joints together"),
-// and per input frame ("the frames", as Play shows them).
-const VIDEO_JOINT_S = 2, VIDEO_TOGETHER_S = 4, VIDEO_FRAME_S = 0.4;
 
 /**
  * A video of the view (MP4 or WebM): the joints swept through their ranges (one at a
@@ -1142,17 +1161,14 @@ async function exportVideo() {
   const base = S.states?.slice() ?? [];
   let frames, pose;
   if (mode === 'frames') {
-    const per = Math.round(VIDEO_FRAME_S * FPS);
+    const per = Math.round(FRAME_S * FPS);
     frames = S.model.frames() * per;
     pose = (i) => { const k = Math.floor(i / per); if (k !== S.current || i === 0) showFrame(k); return k; };
   } else {
-    const paths = joints.map((j) => ({ child: j.child, q: sweep(base[j.child], j.limits) }));
-    const per = Math.round((mode === 'joints' ? VIDEO_JOINT_S : VIDEO_TOGETHER_S) * FPS);
-    frames = mode === 'joints' ? per * joints.length : per;
+    const motion = jointMotion(joints, base, mode);
+    frames = Math.round(motion.seconds * FPS);
     pose = (i) => {
-      const u = (i % per) / per;
-      S.states = base.slice();
-      for (const [n, p] of paths.entries()) if (mode === 'together' || n === Math.floor(i / per)) S.states[p.child] = p.q(u);
+      S.states = motion.at(i / FPS).states;
       syncSliders();
       drawModel();
       return i;

@@ -110,16 +110,3 @@ export async function recordVideo({ wasm, viewer, format = 'mp4', width, height,
   );
   return new Blob([file], { type: FORMATS[format].type });
 }
-
-/**
- * Joint states along a sweep through each joint's range: `q(u)` for u ∈ [0, 1] starts
- * and ends at `start`, and reaches both limits, as a sine about the range's middle.
- */
-export function sweep(start, [lo, hi]) {
-  const mid = (lo + hi) / 2, amp = (hi - lo) / 2;
-  if (!(amp > 0)) return () => start;
-  const phase = Math.asin(Math.max(-1, Math.min(1, (start - mid) / amp)));
-  // Outside the range, the sweep first comes back into it.
-  const off = start - (mid + amp * Math.sin(phase));
-  return (u) => mid + amp * Math.sin(2 * Math.PI * u + phase) + off * (1 - Math.sin(Math.PI * u));
-}
