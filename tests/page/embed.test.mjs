@@ -186,6 +186,9 @@ test('play=joints and play=together move the joints in a figure until a slider i
     assert.ok(values.size >= 4, `${mode}: the first joint moves (${[...values]})`);
     assert.ok(seen.some((s) => Math.abs(s[child] - frameStates[child]) > 0.05), `${mode}: away from the frame's state`);
     assert.equal(await page.evaluate(() => window.gsart.state.current), k);
+    // One joint at a time is highlighted, as when hovered; all at once, none.
+    const hot = () => page.evaluate(() => window.gsart.state.hot);
+    assert.equal(await hot(), mode === 'joints' ? child : -1);
     // A slider stops it where the slider puts it.
     const slider = page.locator('#embed-card input[type=range]').first();
     await slider.evaluate((el) => { el.value = el.min; el.dispatchEvent(new Event('input', { bubbles: true })); });
@@ -193,6 +196,7 @@ test('play=joints and play=together move the joints in a figure until a slider i
     const held = await statesOf();
     await page.waitForTimeout(400);
     assert.deepEqual(await statesOf(), held, `${mode}: stopped`);
+    assert.equal(await hot(), -1, 'the highlight goes with the play');
   }
   assert.deepEqual(errors, []);
   await context.close();

@@ -44,6 +44,7 @@ const S = {
   playing: false,
   playTimer: null,
   playRaf: 0, // the animation frame of joints playing (`play=joints`)
+  movingHot: -1, // the part whose joint moves alone (play=joints, the video), highlighted
   gaussiansOn: true,
   hot: -1,
   palette: null,
@@ -465,18 +466,32 @@ function play() {
   const t0 = performance.now();
   const step = (now) => {
     if (!S.playing || !S.model) return;
-    S.states = motion.at((now - t0) / 1000).states;
+    const { states, moving } = motion.at((now - t0) / 1000);
+    S.states = states;
     syncSliders();
+    showMoving(joints, moving);
     drawModel();
     S.playRaf = requestAnimationFrame(step);
   };
   S.playRaf = requestAnimationFrame(step);
 }
 
+/**
+ * While joints move one at a time (play=joints, the video), the moving joint's axis,
+ * tree node and row are highlighted, as when hovered; `moving` -1 clears it.
+ */
+function showMoving(joints, moving) {
+  const child = moving >= 0 ? joints[moving].child : -1;
+  if (child === S.movingHot) return;
+  S.movingHot = child;
+  markHot(child);
+}
+
 function stopPlay() {
   S.playing = false;
   clearInterval(S.playTimer);
   cancelAnimationFrame(S.playRaf);
+  if (S.movingHot >= 0) { showMoving([], -1); if (S.model) drawModel(); }
   $('btn-play').innerHTML = ICON_PLAY;
   $('btn-play').setAttribute('aria-label', 'Play');
 }
@@ -1039,10 +1054,15 @@ function drawModel({ frameBox = false } = {}) {
 }
 
 function highlightPart(p) {
-  S.hot = p ?? -1;
-  for (const el of document.querySelectorAll('.tree .node')) el.classList.toggle('hot', Number(el.dataset.part) === S.hot);
-  for (const el of document.querySelectorAll('.joint')) el.classList.toggle('hot', Number(el.dataset.child) === S.hot);
+  markHot(p ?? -1);
   if (S.model) drawModel();
+}
+
+/** Part `p` (-1: none) is the hot one: its axis, tree node and joint row stand out. */
+function markHot(p) {
+  S.hot = p;
+  for (const el of document.querySelectorAll('.tree .node')) el.classList.toggle('hot', Number(el.dataset.part) === p);
+  for (const el of document.querySelectorAll('.joint')) el.classList.toggle('hot', Number(el.dataset.child) === p);
 }
 
 const METRIC_LABELS = [
@@ -1168,8 +1188,10 @@ async function exportVideo() {
     const motion = jointMotion(joints, base, mode);
     frames = Math.round(motion.seconds * FPS);
     pose = (i) => {
-      S.states = motion.at(i / FPS).states;
+      const { states, moving } = motion.at(i / FPS);
+      S.states = states;
       syncSliders();
+      showMoving(joints, moving);
       drawModel();
       return i;
     };
@@ -1203,6 +1225,7 @@ async function exportVideo() {
   } finally {
     S.video = null;
     document.body.classList.remove('recording');
+    showMoving([], -1);
     btn.textContent = 'Save video';
     // Put back what was on view: the camera, and the pose unless the model itself was
     // replaced meanwhile.
