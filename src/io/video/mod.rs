@@ -6,9 +6,10 @@
 //! gives a WebM with no duration and no seek index, paced by the wall clock, so a slow
 //! renderer gives an uneven video. Here every frame is known before a byte is written:
 //! sizes are exact, the duration is in the header, and every key frame is a seek point.
-//! No maintained pure-Rust muxer fits (the `webm` crate wraps C++ libwebm, `mp4` and
-//! `mp4-rust` pull in a byte-order stack for a reader we do not need, and neither builds
-//! both containers); each container's subset written here is a few boxes or elements.
+//! No crate fits: the `webm` crate wraps C++ libwebm, which does not build for
+//! `wasm32-unknown-unknown`; the `mp4` crate could write the MP4 but comes with a reader
+//! and its own dependencies for what is about 200 lines here, and writes no WebM. The
+//! subset of each container written here is a few boxes or elements.
 
 pub mod mp4;
 pub mod webm;
