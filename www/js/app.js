@@ -466,22 +466,25 @@ function play() {
   const t0 = performance.now();
   const step = (now) => {
     if (!S.playing || !S.model) return;
-    const { states, moving } = motion.at((now - t0) / 1000);
-    S.states = states;
-    syncSliders();
-    showMoving(joints, moving);
-    drawModel();
+    showJointPose(motion.at((now - t0) / 1000));
     S.playRaf = requestAnimationFrame(step);
   };
   S.playRaf = requestAnimationFrame(step);
 }
 
+/** A pose of a joint motion (motion.js `at`) on view: the states, sliders and highlight. */
+function showJointPose({ states, moving }) {
+  S.states = states;
+  syncSliders();
+  showMoving(moving);
+  drawModel();
+}
+
 /**
  * While joints move one at a time (play=joints, the video), the moving joint's axis,
- * tree node and row are highlighted, as when hovered; `moving` -1 clears it.
+ * tree node and row are highlighted, as when hovered; `child` -1 clears it.
  */
-function showMoving(joints, moving) {
-  const child = moving >= 0 ? joints[moving].child : -1;
+function showMoving(child) {
   if (child === S.movingHot) return;
   S.movingHot = child;
   markHot(child);
@@ -491,7 +494,7 @@ function stopPlay() {
   S.playing = false;
   clearInterval(S.playTimer);
   cancelAnimationFrame(S.playRaf);
-  if (S.movingHot >= 0) { showMoving([], -1); if (S.model) drawModel(); }
+  if (S.movingHot >= 0) { showMoving(-1); if (S.model) drawModel(); }
   $('btn-play').innerHTML = ICON_PLAY;
   $('btn-play').setAttribute('aria-label', 'Play');
 }
@@ -1163,7 +1166,6 @@ async function exportPng() {
   else toast('The screenshot could not be encoded.', 'error');
 }
 
-
 /**
  * A video of the view (MP4 or WebM): the joints swept through their ranges (one at a
  * time, or all at once) from the pose on view, or the frames as Play shows them;
@@ -1177,24 +1179,16 @@ async function exportVideo() {
   const joints = S.model.joints();
   if (mode !== 'frames' && !joints.length) { toast('This model has no joints to move: choose "The frames".', 'error', 6000); return; }
   stopPlay();
-  const saved = { current: S.current, states: S.states?.slice(), cam: S.view.cameraState() };
-  const base = S.states?.slice() ?? [];
+  const saved = { current: S.current, states: S.states?.slice() ?? null, cam: S.view.cameraState() };
   let frames, pose;
   if (mode === 'frames') {
     const per = Math.round(FRAME_S * FPS);
     frames = S.model.frames() * per;
     pose = (i) => { const k = Math.floor(i / per); if (k !== S.current || i === 0) showFrame(k); return k; };
   } else {
-    const motion = jointMotion(joints, base, mode);
+    const motion = jointMotion(joints, saved.states ?? [], mode);
     frames = Math.round(motion.seconds * FPS);
-    pose = (i) => {
-      const { states, moving } = motion.at(i / FPS);
-      S.states = states;
-      syncSliders();
-      showMoving(joints, moving);
-      drawModel();
-      return i;
-    };
+    pose = (i) => { showJointPose(motion.at(i / FPS)); return i; };
   }
   const dpr = window.devicePixelRatio || 1;
   const [width, height] = videoSize(Math.round(S.view.canvas.clientWidth * dpr), Math.round(S.view.canvas.clientHeight * dpr));
@@ -1225,7 +1219,7 @@ async function exportVideo() {
   } finally {
     S.video = null;
     document.body.classList.remove('recording');
-    showMoving([], -1);
+    showMoving(-1);
     btn.textContent = 'Save video';
     // Put back what was on view: the camera, and the pose unless the model itself was
     // replaced meanwhile.

@@ -22,8 +22,8 @@ export function sweep(start, [lo, hi]) {
 /**
  * The motion of `joints` (the model's, each `{child, limits}`) from the states `base`
  * (indexed by child part): `mode` 'joints' sweeps each in turn, 'together' all at once.
- * `seconds` is one loop; `at(t)` gives the states t seconds in (wrapping) and the index
- * of the joint that moves (-1 when all do).
+ * `seconds` is one loop; `at(t)` gives the states t seconds in (wrapping) and `moving`,
+ * the child part of the joint that moves alone (-1 when all do).
  */
 export function jointMotion(joints, base, mode) {
   const paths = joints.map((j) => ({ child: j.child, q: sweep(base[j.child], j.limits) }));
@@ -35,7 +35,7 @@ export function jointMotion(joints, base, mode) {
     const u = cycle - Math.floor(cycle);
     const states = base.slice();
     paths.forEach((p, i) => { if (n < 0 || i === n) states[p.child] = p.q(u); });
-    return { states, moving: n };
+    return { states, moving: n < 0 ? -1 : paths[n].child };
   };
   return { seconds, at };
 }

@@ -13,7 +13,7 @@ const MAX_SIDE = 1920;
  * The containers and the codecs tried for each, best first. H.264 High at level 5.1
  * covers 1920 × 1920; Main and Baseline are for encoders without High.
  */
-export const FORMATS = {
+const FORMATS = {
   mp4: { label: 'MP4 (H.264)', type: 'video/mp4', codecs: ['avc1.640033', 'avc1.4d0033', 'avc1.420033'], extra: { avc: { format: 'avc' } } },
   webm: { label: 'WebM (VP9)', type: 'video/webm', codecs: ['vp09.00.51.08', 'vp8'], extra: {} },
 };

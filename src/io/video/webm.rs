@@ -85,21 +85,13 @@ pub fn mux(track: VideoTrack, frames: &[EncodedFrame], duration_us: u64) -> Resu
         let Some((t0, _, body)) = clusters.last_mut() else {
             unreachable!("a cluster was pushed above");
         };
-        let mut block = Vec::with_capacity(4 + f.data.len());
-        block.push(0x81); // track number 1 as a one-byte vint
-        block.extend_from_slice(&((t - *t0) as i16).to_be_bytes());
-        block.push(if f.key { 0x80 } else { 0x00 });
-        block.extend_from_slice(f.data);
-        element(body, SIMPLE_BLOCK, &block);
+        // The frame's bytes are copied here and once more into the file, not per level.
+        header(body, SIMPLE_BLOCK, 4 + f.data.len() as u64);
+        body.push(0x81); // track number 1 as a one-byte vint
+        body.extend_from_slice(&((t - *t0) as i16).to_be_bytes());
+        body.push(if f.key { 0x80 } else { 0x00 });
+        body.extend_from_slice(f.data);
     }
-    let clusters: Vec<(u64, bool, Vec<u8>)> = clusters
-        .into_iter()
-        .map(|(t, key, body)| {
-            let mut el = Vec::with_capacity(body.len() + 12);
-            element(&mut el, CLUSTER, &body);
-            (t, key, el)
-        })
-        .collect();
 
     let mut info = Vec::new();
     {
@@ -150,7 +142,7 @@ pub fn mux(track: VideoTrack, frames: &[EncodedFrame], duration_us: u64) -> Resu
     let tracks_pos = info_pos + info.len() as u64;
     let mut pos = tracks_pos + tracks.len() as u64;
     let mut cues_body = Vec::new();
-    for (t, key, el) in &clusters {
+    for (t, key, body) in &clusters {
         if *key {
             let mut tp = Vec::new();
             uint_element(&mut tp, CUE_TRACK, 1);
@@ -160,21 +152,15 @@ pub fn mux(track: VideoTrack, frames: &[EncodedFrame], duration_us: u64) -> Resu
             element(&mut cp, CUE_TRACK_POSITIONS, &tp);
             element(&mut cues_body, CUE_POINT, &cp);
         }
-        pos += el.len() as u64;
+        pos += element_len(CLUSTER, body.len() as u64);
     }
     let cues_pos = pos;
     let mut cues = Vec::new();
     element(&mut cues, CUES, &cues_body);
 
-    let mut segment = seek_head([info_pos, tracks_pos, cues_pos]);
-    segment.extend_from_slice(&info);
-    segment.extend_from_slice(&tracks);
-    for (_, _, el) in &clusters {
-        segment.extend_from_slice(el);
-    }
-    segment.extend_from_slice(&cues);
-
-    let mut out = Vec::with_capacity(segment.len() + 64);
+    let head = seek_head([info_pos, tracks_pos, cues_pos]);
+    let segment_len = cues_pos + cues.len() as u64;
+    let mut out = Vec::with_capacity(segment_len as usize + 64);
     {
         let mut b = Vec::new();
         uint_element(&mut b, EBML_VERSION, 1);
@@ -186,7 +172,17 @@ pub fn mux(track: VideoTrack, frames: &[EncodedFrame], duration_us: u64) -> Resu
         uint_element(&mut b, DOC_TYPE_READ_VERSION, 2);
         element(&mut out, EBML, &b);
     }
-    element(&mut out, SEGMENT, &segment);
+    header(&mut out, SEGMENT, segment_len);
+    let segment_start = out.len();
+    for part in [&head, &info, &tracks] {
+        out.extend_from_slice(part);
+    }
+    for (_, _, body) in &clusters {
+        header(&mut out, CLUSTER, body.len() as u64);
+        out.extend_from_slice(body);
+    }
+    out.extend_from_slice(&cues);
+    debug_assert_eq!((out.len() - segment_start) as u64, segment_len);
     Ok(out)
 }
 
@@ -207,9 +203,21 @@ fn push_size(out: &mut Vec<u8>, size: u64) {
     out.extend_from_slice(&marked.to_be_bytes()[8 - len as usize..]);
 }
 
-fn element(out: &mut Vec<u8>, id: u32, data: &[u8]) {
+/// An element's ID and data size; its `size` bytes of data follow.
+fn header(out: &mut Vec<u8>, id: u32, size: u64) {
     out.extend_from_slice(&id_bytes(id));
-    push_size(out, data.len() as u64);
+    push_size(out, size);
+}
+
+/// The length of an element with `size` bytes of data.
+fn element_len(id: u32, size: u64) -> u64 {
+    let mut h = Vec::with_capacity(12);
+    header(&mut h, id, size);
+    h.len() as u64 + size
+}
+
+fn element(out: &mut Vec<u8>, id: u32, data: &[u8]) {
+    header(out, id, data.len() as u64);
     out.extend_from_slice(data);
 }
 
