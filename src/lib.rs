@@ -7,6 +7,7 @@
 #[cfg(not(target_arch = "wasm32"))]
 pub mod bench;
 pub mod bench_step1;
+pub mod edit;
 pub mod error;
 pub mod eval;
 pub mod fit;

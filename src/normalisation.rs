@@ -177,6 +177,14 @@ impl Normalisation {
         DMat4::from_mat3_translation(r, t * self.scale + self.center - r * self.center)
     }
 
+    /// A rigid motion of points from input to fit units (the inverse of
+    /// [`Self::motion_to_input`]): `x ↦ R x + (t + R c − c) / s`.
+    pub fn motion_to_fit(&self, m: &DMat4) -> DMat4 {
+        let r = DMat3::from_mat4(*m);
+        let t = m.w_axis.truncate();
+        DMat4::from_mat3_translation(r, (t + r * self.center - self.center) / self.scale)
+    }
+
     /// The Step-1 model from fit to input units (centres moved and scaled, log-scales
     /// shifted by ln s, rotations unchanged).
     pub fn model_to_input(&self, model: &mut crate::fit::GaussianModel) {
@@ -332,6 +340,9 @@ mod tests {
             let via_fit = n.point_to_input(m_fit.transform_point3(x_fit));
             assert!((m_in.transform_point3(x) - via_fit).length() < 1e-9);
         }
+        // And back: `motion_to_fit` undoes `motion_to_input`.
+        let back = n.motion_to_fit(&m_in);
+        assert!(back.abs_diff_eq(m_fit, 1e-12), "{back:?} vs {m_fit:?}");
         let place_in = DMat4::from_mat3_translation(rot, DVec3::new(50.0, 60.0, -70.0));
         let place_fit = n.placement_to_fit(&place_in);
         let local = DVec3::new(0.01, 0.02, -0.03);

@@ -656,38 +656,7 @@ pub fn finish(
                 .collect()
         })
         .collect();
-    let mut kin_opts = crate::kinematics::KinOptions::default();
-    if step1.occlusion_used {
-        // On occluded input the Gaussians see each part from one side per frame and
-        // their motion is noisier than the joint model's: bench-dev occluded fast,
-        // recon 15.64 with the model's poses vs 16.35 with the observed motion.
-        kin_opts.pose_tolerance = None;
-        // Neither does the ICP polish help there (partial clouds): recon 15.56 vs
-        // 15.70 without, flow 17.94 vs 17.48.
-        kin_opts.polish = false;
-        // Nor the symmetry repair: a half-turned part's fit to a one-sided cloud says
-        // little (seed 0, fast: recon 14.86 → 15.92, TED 5.0 → 5.6 with it).
-        kin_opts.flips = false;
-        // Nor, for the same reason, the spin-free hinges (`kinematics::spin_free`;
-        // bench-dev occluded, fast, seed 0: identical metrics with them).
-        kin_opts.spin_free = false;
-        // Nor the joints proposed anew where their states jump half a turn
-        // (`kinematics::half_turns`): occluded poses jump for other reasons too
-        // (bench-dev occluded, balanced, seeds 0–4: 21 of 35 fits changed, recon 7.25 →
-        // 7.37, flow 7.91 → 7.79, re-animation 5.21 → 5.39, RI and TED the same).
-        kin_opts.half_turns = false;
-        // Nor the still root's motion (see `KinOptions::keep_still_root`): bench-dev
-        // occluded, the seven robots, recon / flow, fast seed 0: 12.61 → 10.62 / 14.31
-        // → 10.81; balanced seed 0: 13.44 → 10.08 / 16.38 → 11.47.
-        kin_opts.keep_still_root = true;
-        // Nor absorbing joints the clouds do not show (`kinematics::invisible_joints`):
-        // a one-sided frame's costs say little (prototype, fast, seeds 0–4: RI 0.790 →
-        // 0.531).
-        kin_opts.absorb_invisible = false;
-        // Nor the restarted pair fits of the tree: bench-dev occluded, balanced, seeds
-        // 0–2, TED 4.10 → 4.29 (fast seeds 0–4 4.37 → 4.31); full input gains.
-        kin_opts.restart_pairs = false;
-    }
+    let kin_opts = kin_options(step1.occlusion_used);
     let (mut result, kin) = crate::kinematics::build_articulated(
         &points,
         &step1.labels,
@@ -732,43 +701,9 @@ pub fn finish(
     // mean RI 0.874 → 0.886, reconstruction 1.015 → 0.973, flow 1.013 → 0.978;
     // balanced 0.888 → 0.898, 0.85 → 0.82, 0.85 → 0.84. Not on occluded input, where
     // a point's part is hidden in many frames: RI 0.745 → 0.741, the rest unchanged.
-    let t_relabel = clock();
-    let (relabelled, unexplained) = if step1.occlusion_used {
-        (0, None)
-    } else {
-        let clouds: Vec<&[glam::Vec3]> = seq.frames.iter().map(|f| f.points.as_slice()).collect();
-        // One index per frame, for the relabelling and the coverage measure.
-        let grids: Vec<crate::geom::knn::Grid> = clouds
-            .iter()
-            .map(|c| crate::geom::knn::Grid::new(c))
-            .collect();
-        let poses: Vec<Vec<glam::DMat4>> = (0..k)
-            .map(|t| {
-                (0..result.parts)
-                    .map(|p| result.pose(t, p).unwrap_or(glam::DMat4::IDENTITY))
-                    .collect()
-            })
-            .collect();
-        let changed = crate::kinematics::relabel::relabel(
-            &clouds,
-            &grids,
-            &mut result.labels,
-            &poses,
-            norm.scale,
-            &Default::default(),
-        );
-        // What the finished model leaves unexplained, for `second_look`.
-        let t = clock();
-        let labels = result
-            .labels
-            .get(canonical)
-            .map_or(&[][..], |l| l.as_slice());
-        let share =
-            crate::kinematics::coverage::unexplained(&clouds, &grids, canonical, labels, &poses);
-        (changed, Some((share, clock() - t)))
-    };
+    let (relabelled, unexplained, relabel_s) =
+        relabel_full(seq, &mut result, norm.scale, step1.occlusion_used, clock);
     let coverage_s = unexplained.map_or(0.0, |u| u.1);
-    let relabel_s = clock() - t_relabel - coverage_s;
     result.points = Some(
         seq.frames[canonical]
             .points
@@ -889,17 +824,51 @@ pub fn finish(
             step1.held_still, step1.m
         ));
     }
+    let kinematics_notes = kin_notes(&kin);
+    notes.extend(kinematics_notes.iter().cloned());
+    result.info = Some(serde_json::json!({
+        "generator": concat!("gsart ", env!("CARGO_PKG_VERSION")),
+        "m": step1.m,
+        "candidates": step1.candidates,
+        "restarts": step1.restarts,
+        "medial_init": step1.medial_init == Some(true),
+        "held_still": step1.held_still,
+        "final_chamfer": step1.final_chamfer,
+        "occlusion_used": step1.occlusion_used,
+        "normalisation": {"center": norm.center.to_array(), "scale": norm.scale},
+        "iterations": step1.iterations,
+        "working_sizes": working_sizes,
+        "step1_seconds": step1.timings.total_s,
+        "candidates_timing": step1.timings.per_candidate,
+        "kinematics_seconds": kin.timings,
+        "relabel": {"changed": relabelled, "seconds": relabel_s},
+        "unexplained": unexplained.map(|u| u.0),
+        "unexplained_seconds": coverage_s,
+        "symmetry_turns": kin.flips,
+        "joint_sweeps": kin.swept,
+        "invisible_joints": invisible_joints(&kin),
+        "parallel_axes": kin.parallel,
+        "half_turns": kin.half_turns,
+        "refine": kin.refine,
+        "notes": notes,
+        "kinematics_notes": kinematics_notes,
+    }));
+    result.validate("result")?;
+    Ok(FitOutput { result, kin, notes })
+}
+
+/// The notes about what Steps 2–3 repaired (symmetric parts turned, joints absorbed,
+/// axes made parallel, states mended, poses found along joints). The result's
+/// `info.kinematics_notes` repeats them so an edit (`crate::edit`) can replace them.
+pub(crate) fn kin_notes(kin: &crate::kinematics::KinReport) -> Vec<String> {
+    let mut notes = Vec::new();
     if kin.flips > 0 {
         notes.push(format!(
             "{} part poses were turned about an axis of their (nearly symmetric) part to follow their joints",
             kin.flips
         ));
     }
-    let invisible = kin
-        .merge_log
-        .iter()
-        .filter(|e| e.kind == "invisible")
-        .count();
+    let invisible = invisible_joints(kin);
     if invisible > 0 {
         notes.push(format!(
             "{invisible} joint(s) absorbed into their parent: each turned its part a quarter turn or more without moving its points (pieces of one nearly symmetric part)"
@@ -933,34 +902,106 @@ pub fn finish(
             kin.swept
         ));
     }
-    result.info = Some(serde_json::json!({
-        "generator": concat!("gsart ", env!("CARGO_PKG_VERSION")),
-        "m": step1.m,
-        "candidates": step1.candidates,
-        "restarts": step1.restarts,
-        "medial_init": step1.medial_init == Some(true),
-        "held_still": step1.held_still,
-        "final_chamfer": step1.final_chamfer,
-        "occlusion_used": step1.occlusion_used,
-        "normalisation": {"center": norm.center.to_array(), "scale": norm.scale},
-        "iterations": step1.iterations,
-        "working_sizes": working_sizes,
-        "step1_seconds": step1.timings.total_s,
-        "candidates_timing": step1.timings.per_candidate,
-        "kinematics_seconds": kin.timings,
-        "relabel": {"changed": relabelled, "seconds": relabel_s},
-        "unexplained": unexplained.map(|u| u.0),
-        "unexplained_seconds": coverage_s,
-        "symmetry_turns": kin.flips,
-        "joint_sweeps": kin.swept,
-        "invisible_joints": invisible,
-        "parallel_axes": kin.parallel,
-        "half_turns": kin.half_turns,
-        "refine": kin.refine,
-        "notes": notes,
-    }));
-    result.validate("result")?;
-    Ok(FitOutput { result, kin, notes })
+    notes
+}
+
+/// Joints Steps 2–3 absorbed into their parent because the clouds do not show them.
+fn invisible_joints(kin: &crate::kinematics::KinReport) -> usize {
+    kin.merge_log
+        .iter()
+        .filter(|e| e.kind == "invisible")
+        .count()
+}
+
+/// On full input, the result's labels relabelled to the part whose motion carries each
+/// point onto the other frames (`kinematics::relabel`), and the share of points the
+/// model leaves unexplained with the seconds it took (`kinematics::coverage`, for
+/// [`second_look`]). Returns (points relabelled, unexplained, relabelling seconds).
+/// `scale`: the fit's normalisation scale. Nothing on occluded input.
+pub(crate) fn relabel_full(
+    seq: &crate::io::sequence::Sequence,
+    result: &mut crate::io::result::FitResult,
+    scale: f64,
+    occluded: bool,
+    clock: &dyn Fn() -> f64,
+) -> (usize, Option<(f64, f64)>, f64) {
+    let k = seq.frames.len();
+    let canonical = result.canonical_frame;
+    let t_relabel = clock();
+    let (relabelled, unexplained) = if occluded {
+        (0, None)
+    } else {
+        let clouds: Vec<&[glam::Vec3]> = seq.frames.iter().map(|f| f.points.as_slice()).collect();
+        // One index per frame, for the relabelling and the coverage measure.
+        let grids: Vec<crate::geom::knn::Grid> = clouds
+            .iter()
+            .map(|c| crate::geom::knn::Grid::new(c))
+            .collect();
+        let poses: Vec<Vec<glam::DMat4>> = (0..k)
+            .map(|t| {
+                (0..result.parts)
+                    .map(|p| result.pose(t, p).unwrap_or(glam::DMat4::IDENTITY))
+                    .collect()
+            })
+            .collect();
+        let changed = crate::kinematics::relabel::relabel(
+            &clouds,
+            &grids,
+            &mut result.labels,
+            &poses,
+            scale,
+            &Default::default(),
+        );
+        // What the finished model leaves unexplained, for `second_look`.
+        let t = clock();
+        let labels = result
+            .labels
+            .get(canonical)
+            .map_or(&[][..], |l| l.as_slice());
+        let share =
+            crate::kinematics::coverage::unexplained(&clouds, &grids, canonical, labels, &poses);
+        (changed, Some((share, clock() - t)))
+    };
+    let coverage_s = unexplained.map_or(0.0, |u| u.1);
+    (relabelled, unexplained, clock() - t_relabel - coverage_s)
+}
+
+/// Steps 2–3's options for full or occluded input (the same for a fit and for a model
+/// edited by hand, `crate::edit`).
+pub(crate) fn kin_options(occluded: bool) -> crate::kinematics::KinOptions {
+    let mut kin_opts = crate::kinematics::KinOptions::default();
+    if occluded {
+        // On occluded input the Gaussians see each part from one side per frame and
+        // their motion is noisier than the joint model's: bench-dev occluded fast,
+        // recon 15.64 with the model's poses vs 16.35 with the observed motion.
+        kin_opts.pose_tolerance = None;
+        // Neither does the ICP polish help there (partial clouds): recon 15.56 vs
+        // 15.70 without, flow 17.94 vs 17.48.
+        kin_opts.polish = false;
+        // Nor the symmetry repair: a half-turned part's fit to a one-sided cloud says
+        // little (seed 0, fast: recon 14.86 → 15.92, TED 5.0 → 5.6 with it).
+        kin_opts.flips = false;
+        // Nor, for the same reason, the spin-free hinges (`kinematics::spin_free`;
+        // bench-dev occluded, fast, seed 0: identical metrics with them).
+        kin_opts.spin_free = false;
+        // Nor the joints proposed anew where their states jump half a turn
+        // (`kinematics::half_turns`): occluded poses jump for other reasons too
+        // (bench-dev occluded, balanced, seeds 0–4: 21 of 35 fits changed, recon 7.25 →
+        // 7.37, flow 7.91 → 7.79, re-animation 5.21 → 5.39, RI and TED the same).
+        kin_opts.half_turns = false;
+        // Nor the still root's motion (see `KinOptions::keep_still_root`): bench-dev
+        // occluded, the seven robots, recon / flow, fast seed 0: 12.61 → 10.62 / 14.31
+        // → 10.81; balanced seed 0: 13.44 → 10.08 / 16.38 → 11.47.
+        kin_opts.keep_still_root = true;
+        // Nor absorbing joints the clouds do not show (`kinematics::invisible_joints`):
+        // a one-sided frame's costs say little (prototype, fast, seeds 0–4: RI 0.790 →
+        // 0.531).
+        kin_opts.absorb_invisible = false;
+        // Nor the restarted pair fits of the tree: bench-dev occluded, balanced, seeds
+        // 0–2, TED 4.10 → 4.29 (fast seeds 0–4 4.37 → 4.31); full input gains.
+        kin_opts.restart_pairs = false;
+    }
+    kin_opts
 }
 
 /// Model selection among finished candidates: the lowest final Chamfer loss.

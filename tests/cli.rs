@@ -1,6 +1,6 @@
 //! The `gsart` binary end to end: `truth` + `eval` on bench-dev (the ground truth
 //! scores perfectly), `fit` + `eval` on an occluded bench-dev robot, `synth` writes a
-//! readable sequence, `articulate` re-poses a result, bad input gives a one-line
+//! readable sequence, `articulate` re-poses a result, `edit` joins parts, bad input gives a one-line
 //! error naming the file, an output that cannot be written fails before the fit, a
 //! reader closing the output pipe early is no crash, a poorly explained balanced fit
 //! is done again from another seed, and `bench` reports a sequence's metrics and its
@@ -207,6 +207,53 @@ fn synth_then_articulate() {
         !ok && err.contains("r.json") && err.contains("joint"),
         "{err}"
     );
+}
+
+/// `gsart edit`: the laptop's ground truth with its lid joined to its base is one part
+/// without joints, written with its URDF and metrics; a join naming no part is one line.
+#[test]
+fn edit_joins_parts() {
+    let dir = tmp("edit");
+    let (seq, result) = laptop_truth(&dir);
+    let (out, urdf) = (dir.join("joined.json"), dir.join("joined.urdf"));
+    let (ok, _, err) = gsart(&[
+        "edit",
+        result.to_str().unwrap(),
+        seq.to_str().unwrap(),
+        "--join",
+        "0,1",
+        "--out",
+        out.to_str().unwrap(),
+        "--urdf",
+        urdf.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("2 parts → 1 part") && err.contains("metrics:"),
+        "{err}"
+    );
+    let r = gsart::io::result::FitResult::from_json(
+        &std::fs::read_to_string(&out).unwrap(),
+        "joined.json",
+    )
+    .unwrap();
+    assert_eq!(r.parts, 1);
+    assert!(std::fs::read_to_string(&urdf).unwrap().contains("<robot"));
+    let (ok, _, err) = gsart(&[
+        "edit",
+        result.to_str().unwrap(),
+        seq.to_str().unwrap(),
+        "--join",
+        "0,7",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && err.starts_with("gsart: ") && err.contains("part 7 does not exist"),
+        "{err}"
+    );
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
 }
 
 #[test]

@@ -87,6 +87,38 @@ mod cli {
             #[arg(long)]
             quiet: bool,
         },
+        /// Edit a fitted model by hand: join parts into one (e.g. the two pieces of a
+        /// link, or a joint that should not be there: its child and its parent), then
+        /// build the tree and the joints again on the sequence it was fitted to.
+        Edit {
+            /// The result to edit (JSON from `gsart fit`, the page or another tool).
+            result: PathBuf,
+            /// The sequence the result was fitted to: a folder, or its PLY files.
+            #[arg(required = true)]
+            input: Vec<PathBuf>,
+            /// Parts to join, by their numbers in RESULT, e.g. `--join 3,5`; repeat for
+            /// more groups (overlapping groups make one part). Without it, Steps 2–3 are
+            /// simply done again on RESULT's segmentation and poses.
+            #[arg(long, value_name = "A,B[,...]")]
+            join: Vec<String>,
+            /// Where to write the edited result JSON.
+            #[arg(long)]
+            out: PathBuf,
+            /// Also write the segmented frames (PLY with `part`) into this folder.
+            #[arg(long)]
+            ply_out: Option<PathBuf>,
+            /// Also write a URDF of the edited model (see `fit --urdf`).
+            #[arg(long)]
+            urdf: Option<PathBuf>,
+            #[arg(long, default_value = "hull", value_parser = ["hull", "box"])]
+            urdf_geometry: String,
+            /// Also write Steps 2–3's report as JSON (see `fit --report`).
+            #[arg(long)]
+            report: Option<PathBuf>,
+            /// No progress bar.
+            #[arg(long)]
+            quiet: bool,
+        },
         /// Metrics of a result against a sequence folder's ground truth (gt.json), as JSON.
         Eval { result: PathBuf, seq_dir: PathBuf },
         /// Write a sequence folder's ground truth (gt.json + labelled frames) as a result
@@ -195,11 +227,38 @@ mod cli {
             .and_then(|(opts, geometry)| {
                 fit(
                     &input,
-                    &out,
                     &opts,
-                    ply_out.as_deref(),
-                    urdf.as_deref().map(|p| (p, geometry)),
-                    report.as_deref(),
+                    &Outputs {
+                        out: &out,
+                        ply_out: ply_out.as_deref(),
+                        urdf: urdf.as_deref().map(|p| (p, geometry)),
+                        report: report.as_deref(),
+                    },
+                    quiet,
+                )
+            }),
+            Command::Edit {
+                result,
+                input,
+                join,
+                out,
+                ply_out,
+                urdf,
+                urdf_geometry,
+                report,
+                quiet,
+            } => parse_joins(&join).and_then(|groups| {
+                let geometry = urdf_geometry.parse::<Geometry>()?;
+                edit(
+                    &result,
+                    &input,
+                    &groups,
+                    &Outputs {
+                        out: &out,
+                        ply_out: ply_out.as_deref(),
+                        urdf: urdf.as_deref().map(|p| (p, geometry)),
+                        report: report.as_deref(),
+                    },
                     quiet,
                 )
             }),
@@ -648,26 +707,100 @@ mod cli {
         format!("[{}{}]", "#".repeat(filled), "-".repeat(width - filled))
     }
 
-    fn fit(
-        input: &[PathBuf],
-        out: &Path,
-        opts: &FitOptions,
-        ply_out: Option<&Path>,
-        urdf: Option<(&Path, Geometry)>,
-        report: Option<&Path>,
-        quiet: bool,
-    ) -> Result<()> {
-        let t0 = Instant::now();
-        check_writable("--out", out)?;
-        for (flag, path) in [("--urdf", urdf.map(|u| u.0)), ("--report", report)] {
-            if let Some(p) = path {
-                check_writable(flag, p)?;
+    /// Where `fit` and `edit` write: the result, and optionally the segmented frames, a
+    /// URDF and Steps 2–3's report.
+    struct Outputs<'a> {
+        out: &'a Path,
+        ply_out: Option<&'a Path>,
+        urdf: Option<(&'a Path, Geometry)>,
+        report: Option<&'a Path>,
+    }
+
+    impl Outputs<'_> {
+        /// Fails before the work when an output cannot be written.
+        fn check(&self) -> Result<()> {
+            check_writable("--out", self.out)?;
+            for (flag, path) in [
+                ("--urdf", self.urdf.map(|u| u.0)),
+                ("--report", self.report),
+            ] {
+                if let Some(p) = path {
+                    check_writable(flag, p)?;
+                }
             }
+            if let Some(dir) = self.ply_out {
+                std::fs::create_dir_all(dir)
+                    .map_err(|e| Error::io(format!("{} (--ply-out)", dir.display()), e))?;
+            }
+            Ok(())
         }
-        if let Some(dir) = ply_out {
-            std::fs::create_dir_all(dir)
-                .map_err(|e| Error::io(format!("{} (--ply-out)", dir.display()), e))?;
+
+        /// Writes what a finished fit or edit produced, and prints its notes and, with
+        /// ground truth, its metrics.
+        fn write(
+            &self,
+            seq: &Sequence,
+            output: &pipeline::FitOutput,
+            gt: Option<&GroundTruth>,
+            t0: Instant,
+        ) -> Result<()> {
+            for note in &output.notes {
+                eprintln!("note: {note}");
+            }
+            let result = &output.result;
+            write_text(self.out, &result.to_json())?;
+            let joints = result.joints.as_ref().map_or(0, |j| j.len());
+            eprintln!(
+                "wrote {} ({}, {}) in {:.1} s",
+                self.out.display(),
+                count(result.parts, "part"),
+                count(joints, "joint"),
+                t0.elapsed().as_secs_f64()
+            );
+            if let Some(dir) = self.ply_out {
+                for (k, frame) in seq.frames.iter().enumerate() {
+                    let stem = Path::new(&frame.name)
+                        .file_stem()
+                        .map(|s| s.to_string_lossy().to_string())
+                        .unwrap_or_else(|| format!("frame_{k:03}"));
+                    let path = dir.join(format!("{stem}_parts.ply"));
+                    let mut buf = Vec::new();
+                    gsart::io::ply::write_ply(
+                        &mut buf,
+                        &frame.points,
+                        Some(&result.labels[k]),
+                        false,
+                    )
+                    .map_err(|e| Error::io(path.display().to_string(), e))?;
+                    std::fs::write(&path, buf)
+                        .map_err(|e| Error::io(path.display().to_string(), e))?;
+                }
+                eprintln!(
+                    "wrote {} segmented frames to {}",
+                    seq.frames.len(),
+                    dir.display()
+                );
+            }
+            if let Some(path) = self.report {
+                let text = serde_json::to_string_pretty(&output.kin)
+                    .map_err(|e| Error::InvalidArgument(format!("report: {e}")))?;
+                write_text(path, &text)?;
+                eprintln!("wrote {}", path.display());
+            }
+            if let Some((path, geometry)) = self.urdf {
+                write_urdf(result, seq, path, geometry)?;
+            }
+            if let Some(gt) = gt {
+                let m = pipeline::evaluate(result, seq, gt)?;
+                eprintln!("metrics: {}", m.summary());
+            }
+            Ok(())
         }
+    }
+
+    fn fit(input: &[PathBuf], opts: &FitOptions, outputs: &Outputs, quiet: bool) -> Result<()> {
+        let t0 = Instant::now();
+        outputs.check()?;
         let (seq, gt) = load(input)?;
         // The part counts Step 1 will fit, for the bar (the fit reports any error).
         let ms = gsart::fit::select::candidates(&seq, opts).unwrap_or_default();
@@ -682,51 +815,53 @@ mod cli {
         if !quiet {
             eprintln!();
         }
-        for note in &output.notes {
-            eprintln!("note: {note}");
+        outputs.write(&seq, &output, gt.as_ref(), t0)
+    }
+
+    /// `--join 3,5 --join 7,8` → `[[3, 5], [7, 8]]`.
+    fn parse_joins(joins: &[String]) -> Result<Vec<Vec<usize>>> {
+        joins
+            .iter()
+            .map(|j| {
+                j.split(',')
+                    .map(|t| {
+                        t.trim().parse::<usize>().map_err(|_| {
+                            Error::InvalidArgument(format!(
+                                "--join {j}: expected part numbers like 3,5"
+                            ))
+                        })
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    fn edit(
+        result: &Path,
+        input: &[PathBuf],
+        groups: &[Vec<usize>],
+        outputs: &Outputs,
+        quiet: bool,
+    ) -> Result<()> {
+        let t0 = Instant::now();
+        outputs.check()?;
+        let old = read_result(result)?;
+        let (seq, gt) = load(input)?;
+        let mut bar = Bar::new(quiet, Vec::new());
+        let clock = move || t0.elapsed().as_secs_f64();
+        let output = gsart::edit::join_parts(&seq, &old, groups, &clock, &mut |p| {
+            bar.show(p);
+            Control::Continue
+        })?;
+        if !quiet {
+            eprintln!();
         }
-        let result = &output.result;
-        write_text(out, &result.to_json())?;
-        let joints = result.joints.as_ref().map_or(0, |j| j.len());
         eprintln!(
-            "wrote {} ({}, {}) in {:.1} s",
-            out.display(),
-            count(result.parts, "part"),
-            count(joints, "joint"),
-            t0.elapsed().as_secs_f64()
+            "{} → {}",
+            count(old.parts, "part"),
+            count(output.result.parts, "part")
         );
-        if let Some(dir) = ply_out {
-            for (k, frame) in seq.frames.iter().enumerate() {
-                let stem = Path::new(&frame.name)
-                    .file_stem()
-                    .map(|s| s.to_string_lossy().to_string())
-                    .unwrap_or_else(|| format!("frame_{k:03}"));
-                let path = dir.join(format!("{stem}_parts.ply"));
-                let mut buf = Vec::new();
-                gsart::io::ply::write_ply(&mut buf, &frame.points, Some(&result.labels[k]), false)
-                    .map_err(|e| Error::io(path.display().to_string(), e))?;
-                std::fs::write(&path, buf).map_err(|e| Error::io(path.display().to_string(), e))?;
-            }
-            eprintln!(
-                "wrote {} segmented frames to {}",
-                seq.frames.len(),
-                dir.display()
-            );
-        }
-        if let Some(path) = report {
-            let text = serde_json::to_string_pretty(&output.kin)
-                .map_err(|e| Error::InvalidArgument(format!("report: {e}")))?;
-            write_text(path, &text)?;
-            eprintln!("wrote {}", path.display());
-        }
-        if let Some((path, geometry)) = urdf {
-            write_urdf(result, &seq, path, geometry)?;
-        }
-        if let Some(gt) = gt {
-            let m = pipeline::evaluate(result, &seq, &gt)?;
-            eprintln!("metrics: {}", m.summary());
-        }
-        Ok(())
+        outputs.write(&seq, &output, gt.as_ref(), t0)
     }
 
     /// The URDF at `path` and, with hull geometry, its meshes in `STEM_meshes/` beside it.

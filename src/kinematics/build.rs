@@ -24,7 +24,9 @@ use super::refine::{refine, RefineOptions, RefineReport};
 use super::screw::{state_range, PartExtent};
 use super::spatial::pair_distances;
 use super::spin_free::{spin_free_hinges, subtree_fit, SpinFree, KEEP_SLACK, PROPOSE_SLACK};
-use super::tree::{least_motion_root, pair_costs, part_motion, spanning_tree};
+use super::tree::{
+    least_motion_root, pair_costs, part_motion, spanning_tree, spanning_tree_keeping,
+};
 use crate::geom::knn::Grid;
 use crate::geom::se3::rigid_inverse;
 use crate::io::gt::JointType;
@@ -93,6 +95,11 @@ pub struct KinOptions {
     /// frame's own turn (`screw::revolute_restart`, `tree::pair_costs`): one frame of
     /// a link flipped half a turn otherwise sets the hinge's axis. Full input only.
     pub restart_pairs: bool,
+    /// A tree to keep (`crate::edit`): its root and its edges, pairs of input parts.
+    /// The edges, mapped to the merged parts, are taken before the pair costs' where
+    /// they form no cycle (`tree::spanning_tree_keeping`) and the root stays the root,
+    /// so joining parts contracts the tree instead of building another.
+    pub keep_tree: Option<(usize, Vec<(usize, usize)>)>,
 }
 
 impl Default for KinOptions {
@@ -110,6 +117,7 @@ impl Default for KinOptions {
             keep_still_root: false,
             absorb_invisible: true,
             restart_pairs: true,
+            keep_tree: None,
         }
     }
 }
@@ -746,8 +754,22 @@ pub fn build_articulated(
         let tree_of = |motions: &[Vec<DMat4>]| {
             let extents = part_extents(points, &new_labels, motions, canonical);
             let costs = pair_costs(motions, &dist, canonical, &extents, opts.restart_pairs);
-            let root = least_motion_root(motions, &sizes);
-            let parent = spanning_tree(&costs, root);
+            let (root, parent) = match &opts.keep_tree {
+                Some((root, edges)) => {
+                    let to = |p: usize| merged.map.get(p).map(|&m| m as usize);
+                    let keep: Vec<(usize, usize)> = edges
+                        .iter()
+                        .filter_map(|&(a, b)| Some((to(a)?, to(b)?)))
+                        .filter(|(a, b)| a != b)
+                        .collect();
+                    let root = to(*root).filter(|&r| r < parts).unwrap_or(0);
+                    (root, spanning_tree_keeping(&costs, root, &keep))
+                }
+                None => {
+                    let root = least_motion_root(motions, &sizes);
+                    (root, spanning_tree(&costs, root))
+                }
+            };
             (extents, costs, root, parent)
         };
         let (mut extents, mut costs, mut root, mut parent) = tree_of(&merged.poses);

@@ -115,12 +115,25 @@ pub fn least_motion_root(poses: &[Vec<DMat4>], sizes: &[usize]) -> usize {
 /// Minimum spanning tree of the pair costs, directed away from `root`.
 /// Returns `parent[p]` (−1 for the root).
 pub fn spanning_tree(costs: &PairCosts, root: usize) -> Vec<i64> {
+    spanning_tree_keeping(costs, root, &[])
+}
+
+/// [`spanning_tree`] that takes the edges `keep` (pairs of parts) before any other,
+/// as far as they form no cycle: a tree given by hand (`crate::edit`) stays as it was
+/// where it still applies, and the pair costs connect the rest.
+pub fn spanning_tree_keeping(costs: &PairCosts, root: usize, keep: &[(usize, usize)]) -> Vec<i64> {
     let n = costs.parts;
     let mut g = UnGraph::<usize, f64>::with_capacity(n, n * (n - 1) / 2);
     let nodes: Vec<_> = (0..n).map(|p| g.add_node(p)).collect();
     for i in 0..n {
         for j in i + 1..n {
-            g.add_edge(nodes[i], nodes[j], costs.total(i, j));
+            // Pair costs are ≥ 0, so a kept edge (−1) comes before every other.
+            let kept = keep.contains(&(i, j)) || keep.contains(&(j, i));
+            g.add_edge(
+                nodes[i],
+                nodes[j],
+                if kept { -1.0 } else { costs.total(i, j) },
+            );
         }
     }
     let mut adj = vec![Vec::new(); n];

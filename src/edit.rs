@@ -1,0 +1,326 @@
+//! Editing a fitted model by hand: parts joined into one, then Steps 2–3 (tree, joints,
+//! refinement) done again on the sequence.
+//!
+//! The fit cannot always tell what moves together: on occluded input a link seen from
+//! two sides can come out as two parts with a spurious joint between them, and a fit of
+//! full input may split a plate. The person looking at the model can: joining the
+//! pieces (in the page, "join" on a joint row, which joins the child to its parent;
+//! natively `gsart edit --join`) gives one part whose motion is re-estimated from its
+//! pieces' (`kinematics::observed::observed_motion`: a least-squares rigid fit of the
+//! pieces' moved points), and the tree and joints are built again with the same
+//! options as the fit's. With no join at all it runs Steps 2–3 on any result's
+//! segmentation and poses (one from another tool, or a ground truth written by
+//! `gsart truth`).
+
+use glam::DMat4;
+
+use crate::io::result::FitResult;
+use crate::io::sequence::Sequence;
+use crate::normalisation::Normalisation;
+use crate::pipeline::{Control, FitOutput, Progress};
+
+/// Groups of `parts` parts to join: overlapping groups are joined together (`1,2` and
+/// `2,3` make one part of 1, 2 and 3). Returns the new part of every old part (joined
+/// parts take the place of their lowest member; the rest keep their order) and the
+/// number of new parts. Errors name the offending part or group.
+pub fn join_map(parts: usize, groups: &[Vec<usize>]) -> crate::Result<(Vec<u32>, usize)> {
+    let bad = |m: String| crate::Error::InvalidArgument(m);
+    let mut root: Vec<usize> = (0..parts).collect();
+    fn find(root: &mut [usize], mut a: usize) -> usize {
+        while root[a] != a {
+            root[a] = root[root[a]];
+            a = root[a];
+        }
+        a
+    }
+    for g in groups {
+        let mut distinct = g.clone();
+        distinct.sort_unstable();
+        distinct.dedup();
+        if distinct.len() < 2 {
+            return Err(bad(format!(
+                "join {g:?}: a join needs two or more different parts"
+            )));
+        }
+        if let Some(&p) = distinct.iter().find(|&&p| p >= parts) {
+            return Err(bad(format!(
+                "join {g:?}: part {p} does not exist (the result has parts 0–{})",
+                parts.saturating_sub(1)
+            )));
+        }
+        for &p in &distinct[1..] {
+            let (a, b) = (find(&mut root, distinct[0]), find(&mut root, p));
+            // The lower part leads, so joined parts take the place of their lowest member.
+            root[a.max(b)] = a.min(b);
+        }
+    }
+    let mut map = vec![u32::MAX; parts];
+    let mut next = 0u32;
+    for p in 0..parts {
+        let r = find(&mut root, p);
+        if map[r] == u32::MAX {
+            map[r] = next;
+            next += 1;
+        }
+        map[p] = map[r];
+    }
+    Ok((map, next as usize))
+}
+
+/// The result `old` with the parts of each of `groups` joined into one, and Steps 2–3
+/// done again on `seq` (the sequence it was fitted to). Labels, Gaussians and the
+/// fit's provenance carry over; `info.edits` records the joins (in the old result's
+/// part numbers) and the notes about Steps 2–3 are replaced. `clock` returns seconds;
+/// `cb` reports the tree and joint stages and may cancel.
+pub fn join_parts(
+    seq: &Sequence,
+    old: &FitResult,
+    groups: &[Vec<usize>],
+    clock: &dyn Fn() -> f64,
+    cb: &mut dyn FnMut(&Progress) -> Control,
+) -> crate::Result<FitOutput> {
+    let k = seq.frames.len();
+    if old.frames != k {
+        return Err(crate::Error::Sequence(format!(
+            "the result has {} frames but the sequence {k}: give the frames it was fitted to",
+            old.frames
+        )));
+    }
+    for (f, l) in seq.frames.iter().zip(&old.labels) {
+        if f.points.len() != l.len() {
+            return Err(crate::Error::input(
+                &f.name,
+                format!(
+                    "{} points, but the result labels {}: give the frames it was fitted to",
+                    f.points.len(),
+                    l.len()
+                ),
+            ));
+        }
+    }
+    let (map, parts) = join_map(old.parts, groups)?;
+    let canonical = old.canonical_frame;
+    let info = old.info.as_ref();
+    let occluded = match info.and_then(|i| i.get("occlusion_used")) {
+        Some(v) => v.as_bool().unwrap_or(false),
+        None => crate::fit::select::will_be_occluded(seq, &Default::default())?,
+    };
+    // Steps 2–3 run in fit units on working clouds of the fit's size (the same
+    // normalisation as a fit of this sequence; the sample is seed 0's).
+    let norm = Normalisation::of(seq);
+    let working_size = info
+        .and_then(|i| i.get("working_sizes"))
+        .and_then(|w| w.as_array())
+        .and_then(|w| w.iter().filter_map(|x| x.as_u64()).max())
+        .map_or(crate::pipeline::FitOptions::default().working_size, |w| {
+            w as usize
+        });
+    let (mut points, working) = crate::fit::select::working_clouds(seq, working_size, 0);
+    for p in &mut points {
+        norm.points_to_fit(p);
+    }
+    let old_labels: Vec<Vec<u32>> = working
+        .iter()
+        .zip(&old.labels)
+        .map(|(idx, l)| idx.iter().map(|&i| l[i as usize]).collect())
+        .collect();
+    let old_poses: Vec<Vec<DMat4>> = (0..k)
+        .map(|t| {
+            (0..old.parts)
+                .map(|p| norm.motion_to_fit(&old.pose(t, p).unwrap_or(DMat4::IDENTITY)))
+                .collect()
+        })
+        .collect();
+    // A joined part moves as the least-squares rigid motion of its pieces' points; a
+    // part with too few points for that keeps its largest piece's motion.
+    let counts = part_counts(&old_labels[canonical], old.parts);
+    let mut largest = vec![None::<usize>; parts];
+    for p in 0..old.parts {
+        let n = map[p] as usize;
+        if largest[n].is_none_or(|q| counts[p] > counts[q]) {
+            largest[n] = Some(p);
+        }
+    }
+    let fallback: Vec<Vec<DMat4>> = old_poses
+        .iter()
+        .map(|f| largest.iter().map(|q| f[q.unwrap_or(0)]).collect())
+        .collect();
+    let poses = crate::kinematics::observed::observed_motion(
+        &points[canonical],
+        &old_labels[canonical],
+        &old_poses,
+        &map,
+        canonical,
+        &fallback,
+    );
+    let labels: Vec<Vec<u32>> = old_labels
+        .iter()
+        .map(|l| l.iter().map(|&p| map[p as usize]).collect())
+        .collect();
+    // The old tree, contracted by the joins, is kept: an edit changes what was asked
+    // for, not the rest of the model (the pair costs only connect what the joins leave
+    // unconnected).
+    let mut kin_opts = crate::pipeline::kin_options(occluded);
+    kin_opts.keep_tree = old.tree.as_ref().map(|t| {
+        let edges = t
+            .parent
+            .iter()
+            .enumerate()
+            .filter_map(|(c, &p)| Some((map[c] as usize, map[usize::try_from(p).ok()?] as usize)))
+            .collect();
+        (map[t.root] as usize, edges)
+    });
+    let (mut result, kin) = crate::kinematics::build_articulated(
+        &points, &labels, &poses, canonical, &kin_opts, clock, cb,
+    )?;
+    norm.result_to_input(&mut result);
+    // Every input point: its old part, joined, then merged by Steps 2–3.
+    let part_of = |p: u32| {
+        map.get(p as usize)
+            .and_then(|&n| kin.merge_map.get(n as usize))
+            .copied()
+            .unwrap_or(0)
+    };
+    result.labels = old
+        .labels
+        .iter()
+        .map(|l| l.iter().map(|&p| part_of(p)).collect())
+        .collect();
+    let (relabelled, unexplained, relabel_s) =
+        crate::pipeline::relabel_full(seq, &mut result, norm.scale, occluded, clock);
+    result.points = Some(
+        seq.frames[canonical]
+            .points
+            .iter()
+            .map(|p| p.to_array())
+            .collect(),
+    );
+    result.gaussians = old.gaussians.clone().map(|mut gs| {
+        for g in &mut gs {
+            g.part = part_of(g.part as u32) as usize;
+        }
+        gs
+    });
+    let notes = edited_notes(old, groups, &kin, result.parts);
+    let mut info = match old.info.clone() {
+        Some(serde_json::Value::Object(o)) => o,
+        _ => serde_json::Map::new(),
+    };
+    let mut edits = info
+        .get("edits")
+        .and_then(|e| e.as_array())
+        .cloned()
+        .unwrap_or_default();
+    edits.push(serde_json::json!({
+        "join": groups,
+        "parts_before": old.parts,
+        "parts_after": result.parts,
+        "occlusion_used": occluded,
+    }));
+    let kin_notes = crate::pipeline::kin_notes(&kin);
+    for (key, value) in [
+        ("edits", serde_json::json!(edits)),
+        ("kinematics_seconds", serde_json::json!(kin.timings)),
+        (
+            "relabel",
+            serde_json::json!({"changed": relabelled, "seconds": relabel_s}),
+        ),
+        ("unexplained", serde_json::json!(unexplained.map(|u| u.0))),
+        ("symmetry_turns", serde_json::json!(kin.flips)),
+        ("joint_sweeps", serde_json::json!(kin.swept)),
+        ("parallel_axes", serde_json::json!(kin.parallel)),
+        ("half_turns", serde_json::json!(kin.half_turns)),
+        ("refine", serde_json::json!(kin.refine)),
+        ("notes", serde_json::json!(notes)),
+        ("kinematics_notes", serde_json::json!(kin_notes)),
+    ] {
+        info.insert(key.to_string(), value);
+    }
+    result.info = Some(serde_json::Value::Object(info));
+    result.validate("edited result")?;
+    Ok(FitOutput { result, kin, notes })
+}
+
+/// Points per part in one frame's labels.
+fn part_counts(labels: &[u32], parts: usize) -> Vec<usize> {
+    let mut n = vec![0; parts];
+    for &l in labels {
+        if let Some(c) = n.get_mut(l as usize) {
+            *c += 1;
+        }
+    }
+    n
+}
+
+/// The old result's notes without its notes about Steps 2–3, then the new Steps 2–3's,
+/// then one saying what was joined.
+fn edited_notes(
+    old: &FitResult,
+    groups: &[Vec<usize>],
+    kin: &crate::kinematics::KinReport,
+    parts: usize,
+) -> Vec<String> {
+    let info = old.info.as_ref();
+    let strings = |key: &str| -> Vec<String> {
+        info.and_then(|i| i.get(key))
+            .and_then(|n| n.as_array())
+            .map(|a| {
+                a.iter()
+                    .filter_map(|s| s.as_str().map(str::to_string))
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    let stale = strings("kinematics_notes");
+    let mut notes: Vec<String> = strings("notes")
+        .into_iter()
+        .filter(|n| !stale.contains(n))
+        .collect();
+    notes.extend(crate::pipeline::kin_notes(kin));
+    let what = if groups.is_empty() {
+        "no parts joined".to_string()
+    } else {
+        let list: Vec<String> = groups
+            .iter()
+            .map(|g| {
+                let ps: Vec<String> = g.iter().map(usize::to_string).collect();
+                ps.join(" + ")
+            })
+            .collect();
+        format!("parts {} of the previous model joined", list.join(", "))
+    };
+    notes.push(format!(
+        "edited by hand: {what}; the tree and the joints were built again ({} parts, {} before)",
+        parts, old.parts
+    ));
+    notes
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn joins_union_overlapping_groups_and_keep_the_order() {
+        let (map, n) = join_map(6, &[vec![4, 1], vec![1, 2]]).unwrap();
+        // 1, 2 and 4 become one part in 1's place; 3 and 5 follow in order.
+        assert_eq!(map, vec![0, 1, 1, 2, 1, 3]);
+        assert_eq!(n, 4);
+        let (map, n) = join_map(3, &[]).unwrap();
+        assert_eq!((map, n), (vec![0, 1, 2], 3));
+        // Repeated parts in a group count once.
+        assert_eq!(join_map(3, &[vec![2, 2, 0]]).unwrap(), (vec![0, 1, 0], 2));
+    }
+
+    #[test]
+    fn joins_naming_no_part_or_one_part_are_refused() {
+        let e = join_map(3, &[vec![0, 3]]).unwrap_err().to_string();
+        assert!(
+            e.contains("part 3 does not exist") && e.contains("0–2"),
+            "{e}"
+        );
+        let e = join_map(3, &[vec![2, 2]]).unwrap_err().to_string();
+        assert!(e.contains("two or more"), "{e}");
+        assert!(join_map(3, &[vec![]]).is_err());
+    }
+}
