@@ -289,9 +289,11 @@ fn edited_notes(
             .collect();
         format!("parts {} of the previous model joined", list.join(", "))
     };
+    let plural = |n: usize| if n == 1 { "part" } else { "parts" };
     notes.push(format!(
-        "edited by hand: {what}; the tree and the joints were built again ({} parts, {} before)",
-        parts, old.parts
+        "edited by hand: {what}; the tree and the joints were built again ({parts} {}, {} before)",
+        plural(parts),
+        old.parts
     ));
     notes
 }

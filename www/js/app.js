@@ -54,6 +54,9 @@ const S = {
   movedRunners: [],
   resultExtra: {}, // what the result on view was opened with (openResult's `extra`)
   video: null, // the AbortController of a video being recorded
+  modelAttached: false, // the model on view labels the loaded frames (so it can be edited)
+  editJob: null, // the WorkerJob of a running edit (parts joined)
+  undo: [], // models before each edit: {text, source, extra}
 };
 
 // ------------------------------------------------------------------ helpers
@@ -159,8 +162,10 @@ function applyHashCamera() {
 
 // ------------------------------------------------------------------ loading
 
-function resetResult() {
+function resetResult({ keepUndo = false } = {}) {
   S.video?.abort();
+  S.editJob?.cancel();
+  if (!keepUndo) S.undo = [];
   stopPlay();
   if (S.model) { try { S.model.free(); } catch { /* already freed */ } }
   S.model = null;
@@ -889,6 +894,11 @@ function showSnapshot(m, snap) {
 
 // ------------------------------------------------------------------ results
 
+/**
+ * Opens a result (JSON text) on the page. `how`: 'fit' (fitted here), 'file', 'url' or
+ * 'edit' (an edit of the model on view, or its undo: the view, the frame and the undo
+ * history stay).
+ */
 function openResult(text, source, how, extra = {}) {
   let model;
   try {
@@ -898,7 +908,8 @@ function openResult(text, source, how, extra = {}) {
     else toast(errText(e), 'error', 9000);
     return false;
   }
-  resetResult();
+  const edit = how === 'edit';
+  resetResult({ keepUndo: edit });
   S.model = model;
   S.modelSource = how;
   S.metrics = extra.metrics ?? null;
@@ -906,17 +917,18 @@ function openResult(text, source, how, extra = {}) {
   // Points: the loaded frames when they match the result, else the points the file carries.
   const good = goodFrames();
   let attached = false;
-  if (how === 'fit' || (good.length === model.frames() && good.every((f, k) => model.label_count(k) === f.points.length / 3))) {
+  if (how === 'fit' || edit || (good.length === model.frames() && good.every((f, k) => model.label_count(k) === f.points.length / 3))) {
     try {
       good.forEach((f, k) => model.set_frame_points(k, f.points));
       attached = true;
     } catch (e) { console.warn('frames do not match the result', e); }
   }
+  S.modelAttached = attached;
   if (!attached) {
     if (!model.has_points()) {
       toast('This result carries no points and does not match the loaded frames: load its frames to see it.', 'error', 9000);
     }
-    if (how !== 'fit') {
+    if (how !== 'fit' && !edit) {
       // A shared result stands alone: its frames are not the ones in the list.
       S.seqName = source;
     }
@@ -926,10 +938,10 @@ function openResult(text, source, how, extra = {}) {
   }
   S.resultExtra = extra;
   renderResult(extra);
-  showFrame(Math.min(S.current, model.frames() - 1), { frameBox: how !== 'fit' });
-  if (how !== 'fit') applyHashCamera();
-  if (PLAY && !extra.provisional) play();
-  if (!extra.provisional && !EMBED) {
+  showFrame(Math.min(S.current, model.frames() - 1), { frameBox: how !== 'fit' && !edit });
+  if (how !== 'fit' && !edit) applyHashCamera();
+  if (PLAY && !extra.provisional && !edit) play();
+  if (!extra.provisional && !EMBED && !edit) {
     // Not in an iframe: scrolling into view there would scroll the host page too.
     setStepActive('step-explore');
     $('step-explore').scrollIntoView({ block: 'start', behavior: 'smooth' });
@@ -1015,14 +1027,104 @@ function renderResult(extra = {}) {
     slider.addEventListener('blur', () => highlightPart(null));
     row.addEventListener('mouseenter', () => highlightPart(j.child));
     row.addEventListener('mouseleave', () => highlightPart(null));
-    row.append(sw, title, val, detail, slider);
+    row.append(sw, title, val);
+    if (canEdit()) {
+      const join = document.createElement('button');
+      join.className = 'button small jjoin';
+      join.textContent = 'Join';
+      join.title = `No joint here: make part ${j.child} one rigid part with part ${j.parent}, then build the tree and the joints again`;
+      join.setAttribute('aria-label', `Join part ${j.child} to part ${j.parent}`);
+      join.addEventListener('click', () => joinParts(j.parent, j.child));
+      row.append(join);
+    }
+    row.append(detail, slider);
     row._fmt = fmtState;
     row._unit = unit;
     list.appendChild(row);
   });
 
+  $('btn-undo-edit').hidden = !S.undo.length;
   // Metrics
   renderMetrics();
+}
+
+// ------------------------------------------------------------------ edits
+
+/**
+ * Whether the model on view can be edited by hand: it labels the loaded frames (an
+ * edit builds its tree and joints again on them), it has a tree, and no fit runs.
+ */
+function canEdit() {
+  return !!S.model && S.modelAttached && S.model.has_tree() && !EMBED && !S.fitRunning;
+}
+
+function editStatus(html) {
+  const el = $('edit-status');
+  el.hidden = !html;
+  $('edit-text').innerHTML = html || '';
+}
+
+/**
+ * Joins part `child` to part `parent` (a joint that should not be there, or two
+ * pieces of one link): the core's `edit_join` in a worker builds the tree and the
+ * joints again on the loaded frames, keeping the rest of the tree. The model before
+ * goes on the undo history.
+ */
+async function joinParts(parent, child) {
+  if (!canEdit() || S.editJob) return;
+  stopPlay();
+  const good = goodFrames();
+  const before = { text: S.model.to_json(false), source: S.modelSource, extra: S.resultExtra };
+  const gtOk = S.gt && good.length === S.frames.length && good.every((f) => f.labels);
+  const frames = good.map((f) => f.points.slice());
+  const what = `Joining part ${child} to part ${parent}`;
+  editStatus(`${escapeHtml(what)}: building the tree and the joints again…`);
+  for (const b of document.querySelectorAll('.jjoin')) b.disabled = true;
+  const t0 = performance.now();
+  const job = new WorkerJob(
+    {
+      type: 'edit', frames, names: good.map((f) => f.name), result: before.text, joins: [[parent, child]],
+      gt: gtOk ? S.gt : null, labels: gtOk ? good.map((f) => f.labels) : null,
+    },
+    frames.map((a) => a.buffer),
+    (msg) => {
+      if (msg.type !== 'progress' || S.editJob !== job) return;
+      const step = msg.stage === 'joints' ? `refining the joints ${msg.iter}/${msg.total}`
+        : msg.stage === 'metrics' ? 'metrics' : 'building the tree';
+      editStatus(`${escapeHtml(what)}: ${step}…`);
+    },
+  );
+  S.editJob = job;
+  try {
+    const r = await job.promise;
+    if (S.editJob !== job) return;
+    S.editJob = null;
+    const old = S.model.parts();
+    S.undo.push(before);
+    if (!openResult(r.result, S.seqName, 'edit', { ...before.extra, metrics: r.metrics, metricsError: r.metricsError })) {
+      S.undo.pop();
+      return;
+    }
+    const n = S.model.joints().length;
+    editStatus('');
+    toast(`Parts ${parent} and ${child} joined in ${((performance.now() - t0) / 1000).toFixed(1)} s: `
+      + `${old} → ${S.model.parts()} parts, ${n} joint${n === 1 ? '' : 's'}.`, '', 5000);
+  } catch (e) {
+    if (S.editJob === job) S.editJob = null;
+    editStatus('');
+    for (const b of document.querySelectorAll('.jjoin')) b.disabled = false;
+    if (!(e instanceof CancelledError)) toast(`Could not join the parts: ${errText(e)}`, 'error', 9000);
+  }
+}
+
+/** The model before the last edit, back on view. */
+function undoEdit() {
+  const prev = S.undo.pop();
+  if (!prev || S.editJob) { if (prev) S.undo.push(prev); return; }
+  if (!openResult(prev.text, S.seqName, 'edit', prev.extra)) return;
+  // It is the model it was before, not an edit.
+  S.modelSource = prev.source;
+  toast('Edit undone.', '', 2500);
 }
 
 function syncSliders() {
@@ -1247,7 +1349,8 @@ function shareUrl({ fitted = false, model = null } = {}) {
   }
   if (model) url.searchParams.set('model', model);
   else if (S.modelSource === 'url' && S.modelUrl) url.searchParams.set('model', new URL(S.modelUrl, location.href).toString());
-  else if (S.example) {
+  else if (S.example && S.modelSource !== 'edit') {
+    // An edited model is not the example's fit: it has no address until saved.
     url.searchParams.set('example', S.example);
     if (S.model && S.modelSource === 'fit' && S.fitOpts) {
       // The settings of the fit on view: the link's page fits as this one did.
@@ -1270,6 +1373,11 @@ async function copyText(text, what, note = '') {
 }
 
 async function copyLink() {
+  if (S.model && S.modelSource === 'edit') {
+    // The page's own address would open the example and fit it again, without the edit.
+    toast(`An edited model has no link yet. ${NOT_SHAREABLE}`, '', 7000);
+    return;
+  }
   const url = shareUrl();
   if (url) await copyText(readableUrl(url), 'Link');
   else await copyText(location.href, 'Link', NOT_SHAREABLE);
@@ -1365,6 +1473,13 @@ function wire() {
   $('btn-gaussians').addEventListener('click', toggleGaussians);
   $('btn-screenshot').addEventListener('click', exportPng);
   $('btn-reset-joints').addEventListener('click', () => { if (S.model) showFrame(S.current); });
+  $('btn-undo-edit').addEventListener('click', undoEdit);
+  $('btn-cancel-edit').addEventListener('click', () => {
+    S.editJob?.cancel();
+    S.editJob = null;
+    editStatus('');
+    for (const b of document.querySelectorAll('.jjoin')) b.disabled = false;
+  });
   $('btn-export-json').addEventListener('click', exportJson);
   $('btn-export-ply').addEventListener('click', exportPly);
   $('btn-export-urdf').addEventListener('click', exportUrdf);
