@@ -201,7 +201,8 @@ pub fn join_parts(
         }
         gs
     });
-    let notes = edited_notes(old, groups, &kin, result.parts);
+    let kin_notes = crate::pipeline::kin_notes(&kin);
+    let notes = edited_notes(old, groups, &kin_notes, result.parts);
     let mut info = match old.info.clone() {
         Some(serde_json::Value::Object(o)) => o,
         _ => serde_json::Map::new(),
@@ -217,7 +218,6 @@ pub fn join_parts(
         "parts_after": result.parts,
         "occlusion_used": occluded,
     }));
-    let kin_notes = crate::pipeline::kin_notes(&kin);
     for (key, value) in [
         ("edits", serde_json::json!(edits)),
         ("kinematics_seconds", serde_json::json!(kin.timings)),
@@ -257,7 +257,7 @@ fn part_counts(labels: &[u32], parts: usize) -> Vec<usize> {
 fn edited_notes(
     old: &FitResult,
     groups: &[Vec<usize>],
-    kin: &crate::kinematics::KinReport,
+    kin_notes: &[String],
     parts: usize,
 ) -> Vec<String> {
     let info = old.info.as_ref();
@@ -276,7 +276,7 @@ fn edited_notes(
         .into_iter()
         .filter(|n| !stale.contains(n))
         .collect();
-    notes.extend(crate::pipeline::kin_notes(kin));
+    notes.extend(kin_notes.iter().cloned());
     let what = if groups.is_empty() {
         "no parts joined".to_string()
     } else {

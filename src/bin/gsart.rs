@@ -34,9 +34,6 @@ mod cli {
             /// A sequence folder, or two or more PLY files (natural filename order).
             #[arg(required = true)]
             input: Vec<PathBuf>,
-            /// Where to write the result JSON.
-            #[arg(long)]
-            out: PathBuf,
             /// Range of Gaussian counts to try, e.g. `10..15` or `8` (default: from the data).
             #[arg(long)]
             parts: Option<String>,
@@ -67,25 +64,8 @@ mod cli {
             /// Frames larger than this are downsampled for the fit.
             #[arg(long, default_value_t = 4096)]
             working_size: usize,
-            /// Also write the segmented frames (PLY with `part`) into this folder.
-            #[arg(long)]
-            ply_out: Option<PathBuf>,
-            /// Also write a URDF of the recovered model. With hull geometry its link
-            /// meshes (binary STL) go into a folder beside it, named after it
-            /// (`model.urdf` → `model_meshes/`).
-            #[arg(long)]
-            urdf: Option<PathBuf>,
-            /// The URDF links' geometry: each part's convex hull as a mesh, with the
-            /// solid hull's inertia, or a bounding box (one file, no meshes).
-            #[arg(long, default_value = "hull", value_parser = ["hull", "box"])]
-            urdf_geometry: String,
-            /// Also write Steps 2–3's report (merges, pair costs, root, tree, joint
-            /// residuals, refinement, timings) as JSON, to see why a tree came out as it did.
-            #[arg(long)]
-            report: Option<PathBuf>,
-            /// No progress bar.
-            #[arg(long)]
-            quiet: bool,
+            #[command(flatten)]
+            outputs: OutputArgs,
         },
         /// Edit a fitted model by hand: join parts into one (e.g. the two pieces of a
         /// link, or a joint that should not be there: its child and its parent), then
@@ -101,23 +81,8 @@ mod cli {
             /// simply done again on RESULT's segmentation and poses.
             #[arg(long, value_name = "A,B[,...]")]
             join: Vec<String>,
-            /// Where to write the edited result JSON.
-            #[arg(long)]
-            out: PathBuf,
-            /// Also write the segmented frames (PLY with `part`) into this folder.
-            #[arg(long)]
-            ply_out: Option<PathBuf>,
-            /// Also write a URDF of the edited model (see `fit --urdf`).
-            #[arg(long)]
-            urdf: Option<PathBuf>,
-            #[arg(long, default_value = "hull", value_parser = ["hull", "box"])]
-            urdf_geometry: String,
-            /// Also write Steps 2–3's report as JSON (see `fit --report`).
-            #[arg(long)]
-            report: Option<PathBuf>,
-            /// No progress bar.
-            #[arg(long)]
-            quiet: bool,
+            #[command(flatten)]
+            outputs: OutputArgs,
         },
         /// Metrics of a result against a sequence folder's ground truth (gt.json), as JSON.
         Eval { result: PathBuf, seq_dir: PathBuf },
@@ -191,12 +156,51 @@ mod cli {
         },
     }
 
+    /// What `fit` and `edit` write.
+    #[derive(clap::Args)]
+    struct OutputArgs {
+        /// Where to write the result JSON.
+        #[arg(long)]
+        out: PathBuf,
+        /// Also write the segmented frames (PLY with `part`) into this folder.
+        #[arg(long)]
+        ply_out: Option<PathBuf>,
+        /// Also write a URDF of the model. With hull geometry its link meshes (binary
+        /// STL) go into a folder beside it, named after it (`model.urdf` →
+        /// `model_meshes/`).
+        #[arg(long)]
+        urdf: Option<PathBuf>,
+        /// The URDF links' geometry: each part's convex hull as a mesh, with the solid
+        /// hull's inertia, or a bounding box (one file, no meshes).
+        #[arg(long, default_value = "hull", value_parser = ["hull", "box"])]
+        urdf_geometry: String,
+        /// Also write Steps 2–3's report (merges, pair costs, root, tree, joint
+        /// residuals, refinement, timings) as JSON, to see why a tree came out as it did.
+        #[arg(long)]
+        report: Option<PathBuf>,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+    }
+
+    impl OutputArgs {
+        /// The outputs, with the URDF geometry parsed.
+        fn outputs(&self) -> Result<Outputs<'_>> {
+            let geometry = self.urdf_geometry.parse::<Geometry>()?;
+            Ok(Outputs {
+                out: &self.out,
+                ply_out: self.ply_out.as_deref(),
+                urdf: self.urdf.as_deref().map(|p| (p, geometry)),
+                report: self.report.as_deref(),
+            })
+        }
+    }
+
     pub fn main() -> i32 {
         let cli = Cli::parse();
         let r = match cli.command {
             Command::Fit {
                 input,
-                out,
                 parts,
                 iters,
                 quality,
@@ -205,11 +209,7 @@ mod cli {
                 restarts,
                 medial_init,
                 working_size,
-                ply_out,
-                urdf,
-                urdf_geometry,
-                report,
-                quiet,
+                outputs,
             } => parse_options(
                 parts.as_deref(),
                 iters,
@@ -223,44 +223,14 @@ mod cli {
                 medial_init,
                 ..opts
             })
-            .and_then(|opts| Ok((opts, urdf_geometry.parse::<Geometry>()?)))
-            .and_then(|(opts, geometry)| {
-                fit(
-                    &input,
-                    &opts,
-                    &Outputs {
-                        out: &out,
-                        ply_out: ply_out.as_deref(),
-                        urdf: urdf.as_deref().map(|p| (p, geometry)),
-                        report: report.as_deref(),
-                    },
-                    quiet,
-                )
-            }),
+            .and_then(|opts| fit(&input, &opts, &outputs.outputs()?, outputs.quiet)),
             Command::Edit {
                 result,
                 input,
                 join,
-                out,
-                ply_out,
-                urdf,
-                urdf_geometry,
-                report,
-                quiet,
+                outputs,
             } => parse_joins(&join).and_then(|groups| {
-                let geometry = urdf_geometry.parse::<Geometry>()?;
-                edit(
-                    &result,
-                    &input,
-                    &groups,
-                    &Outputs {
-                        out: &out,
-                        ply_out: ply_out.as_deref(),
-                        urdf: urdf.as_deref().map(|p| (p, geometry)),
-                        report: report.as_deref(),
-                    },
-                    quiet,
-                )
+                edit(&result, &input, &groups, &outputs.outputs()?, outputs.quiet)
             }),
             Command::Eval { result, seq_dir } => eval(&result, &seq_dir),
             Command::Truth {
