@@ -1,8 +1,8 @@
 // Editing a model by hand (www/js/app.js `joinParts`, the core's `edit_join`): the
 // fitted laptop's hinge joined away in a worker gives one part and no joint, with the
 // metrics against the example's ground truth; "Undo join" puts the fitted model back
-// exactly; an edited model is not shared as the example's fit; a model whose frames
-// are not loaded offers no join.
+// exactly; a join can be cancelled; an edited model is not shared as the example's
+// fit; a model whose frames are not loaded offers no join.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { startServer, launch, newPage, waitLoaded } from './helpers.mjs';
@@ -70,6 +70,18 @@ test('joining the hinge leaves one part; undo puts the fit back', { timeout: 300
   assert.deepEqual(back.json.joints, fitted.json.joints);
   assert.equal(await page.locator('#btn-undo-edit').isVisible(), false);
   assert.equal(await page.locator('.joint .jjoin').count(), 1);
+
+  // A join cancelled while it runs leaves the model as it was.
+  await page.locator('.joint .jjoin').click();
+  await page.locator('#btn-cancel-edit').click();
+  const kept = await modelState();
+  assert.equal(kept.joints, 1);
+  assert.deepEqual(kept.labels, fitted.labels);
+  assert.equal(await page.locator('#edit-status').isVisible(), false);
+  assert.equal(await page.locator('.joint .jjoin').isEnabled(), true);
+  assert.equal(await page.locator('#btn-undo-edit').isVisible(), false);
+  await page.waitForTimeout(4000); // longer than the join took: nothing arrives late
+  assert.equal((await modelState()).joints, 1);
   assert.deepEqual(errors, []);
 });
 

@@ -165,6 +165,8 @@ function applyHashCamera() {
 function resetResult({ keepUndo = false } = {}) {
   S.video?.abort();
   S.editJob?.cancel();
+  S.editJob = null;
+  editStatus('');
   if (!keepUndo) S.undo = [];
   stopPlay();
   if (S.model) { try { S.model.free(); } catch { /* already freed */ } }
