@@ -1,5 +1,5 @@
-//! Editing a fitted model by hand: parts joined into one, then Steps 2–3 (tree, joints,
-//! refinement) done again on the sequence.
+//! Editing a fitted model by hand: parts joined into one, joint types chosen, then
+//! Steps 2–3 (tree, joints, refinement) done again on the sequence.
 //!
 //! The fit cannot always tell what moves together: on occluded input a link seen from
 //! two sides can come out as two parts with a spurious joint between them, and a fit of
@@ -8,12 +8,16 @@
 //! natively `gsart edit --join`) gives one part whose motion is re-estimated from its
 //! pieces' (`kinematics::observed::observed_motion`: a least-squares rigid fit of the
 //! pieces' moved points), and the tree and joints are built again with the same
-//! options as the fit's. With no join at all it runs Steps 2–3 on any result's
+//! options as the fit's. A joint's type can be chosen too (the page's "Make prismatic"
+//! / "Make revolute", `gsart edit --joint-type 5=prismatic`): the type rule of
+//! `kinematics::screw` decides from the clouds, which one-sided views can fool (an
+//! occluded gripper's slides come out as hinges). With no edit at all it runs Steps 2–3 on any result's
 //! segmentation and poses (one from another tool, or a ground truth written by
 //! `gsart truth`).
 
 use glam::DMat4;
 
+use crate::io::gt::JointType;
 use crate::io::result::FitResult;
 use crate::io::sequence::Sequence;
 use crate::normalisation::Normalisation;
@@ -67,18 +71,30 @@ pub fn join_map(parts: usize, groups: &[Vec<usize>]) -> crate::Result<(Vec<u32>,
     Ok((map, next as usize))
 }
 
-/// The result `old` with the parts of each of `groups` joined into one, and Steps 2–3
-/// done again on `seq` (the sequence it was fitted to). Labels, Gaussians and the
-/// fit's provenance carry over; `info.edits` records the joins (in the old result's
-/// part numbers) and the notes about Steps 2–3 are replaced. `clock` returns seconds;
-/// `cb` reports the tree and joint stages and may cancel.
-pub fn join_parts(
+/// An edit by hand, in the part numbers of the result it applies to.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Edit {
+    /// Groups of parts to join into one (see [`join_map`]).
+    #[serde(default)]
+    pub join: Vec<Vec<usize>>,
+    /// (part, type): the joint whose child is that part (joined, if it is) gets the type.
+    #[serde(default)]
+    pub joint_types: Vec<(usize, JointType)>,
+}
+
+/// The result `old` with `edit` applied, and Steps 2–3 done again on `seq` (the
+/// sequence it was fitted to). Labels, Gaussians and the fit's provenance carry over;
+/// `info.edits` records the edit (in the old result's part numbers) and the notes
+/// about Steps 2–3 are replaced. `clock` returns seconds; `cb` reports the tree and
+/// joint stages and may cancel.
+pub fn apply(
     seq: &Sequence,
     old: &FitResult,
-    groups: &[Vec<usize>],
+    edit: &Edit,
     clock: &dyn Fn() -> f64,
     cb: &mut dyn FnMut(&Progress) -> Control,
 ) -> crate::Result<FitOutput> {
+    let groups = &edit.join[..];
     let k = seq.frames.len();
     if old.frames != k {
         return Err(crate::Error::Sequence(format!(
@@ -99,6 +115,7 @@ pub fn join_parts(
         }
     }
     let (map, parts) = join_map(old.parts, groups)?;
+    let joint_types = joint_types(old, &map, &edit.joint_types)?;
     let canonical = old.canonical_frame;
     let info = old.info.as_ref();
     let occluded = match info.and_then(|i| i.get("occlusion_used")) {
@@ -170,6 +187,7 @@ pub fn join_parts(
             .collect();
         (map[t.root] as usize, edges)
     });
+    kin_opts.joint_types = joint_types;
     let (mut result, kin) = crate::kinematics::build_articulated(
         &points, &labels, &poses, canonical, &kin_opts, clock, cb,
     )?;
@@ -202,7 +220,7 @@ pub fn join_parts(
         gs
     });
     let kin_notes = crate::pipeline::kin_notes(&kin);
-    let notes = edited_notes(old, groups, &kin_notes, result.parts);
+    let notes = edited_notes(old, edit, &kin_notes, result.parts);
     let mut info = match old.info.clone() {
         Some(serde_json::Value::Object(o)) => o,
         _ => serde_json::Map::new(),
@@ -214,6 +232,7 @@ pub fn join_parts(
         .unwrap_or_default();
     edits.push(serde_json::json!({
         "join": groups,
+        "joint_types": edit.joint_types,
         "parts_before": old.parts,
         "parts_after": result.parts,
         "occlusion_used": occluded,
@@ -252,14 +271,38 @@ fn part_counts(labels: &[u32], parts: usize) -> Vec<usize> {
     n
 }
 
-/// The old result's notes without its notes about Steps 2–3, then the new Steps 2–3's,
-/// then one saying what was joined.
-fn edited_notes(
+/// The joint types of `given` (old part numbers) for Steps 2–3's input parts (`map`:
+/// old part → joined part). A part that is the root of the old tree (or joined to it)
+/// has no joint to give a type.
+fn joint_types(
     old: &FitResult,
-    groups: &[Vec<usize>],
-    kin_notes: &[String],
-    parts: usize,
-) -> Vec<String> {
+    map: &[u32],
+    given: &[(usize, JointType)],
+) -> crate::Result<Vec<(usize, JointType)>> {
+    let bad = |m: String| crate::Error::InvalidArgument(m);
+    let mut out = Vec::with_capacity(given.len());
+    for &(p, jt) in given {
+        let Some(&n) = map.get(p) else {
+            return Err(bad(format!(
+                "joint type of part {p}: the part does not exist (the result has parts 0–{})",
+                old.parts.saturating_sub(1)
+            )));
+        };
+        if let Some(t) = &old.tree {
+            if map[t.root] == n {
+                return Err(bad(format!(
+                    "joint type of part {p}: it is the root (or joined to it), which has no joint"
+                )));
+            }
+        }
+        out.push((n as usize, jt));
+    }
+    Ok(out)
+}
+
+/// The old result's notes without its notes about Steps 2–3, then the new Steps 2–3's,
+/// then one saying what was edited.
+fn edited_notes(old: &FitResult, edit: &Edit, kin_notes: &[String], parts: usize) -> Vec<String> {
     let info = old.info.as_ref();
     let strings = |key: &str| -> Vec<String> {
         info.and_then(|i| i.get(key))
@@ -277,17 +320,32 @@ fn edited_notes(
         .filter(|n| !stale.contains(n))
         .collect();
     notes.extend(kin_notes.iter().cloned());
-    let what = if groups.is_empty() {
-        "no parts joined".to_string()
-    } else {
-        let list: Vec<String> = groups
+    let mut what = Vec::new();
+    if !edit.join.is_empty() {
+        let list: Vec<String> = edit
+            .join
             .iter()
             .map(|g| {
                 let ps: Vec<String> = g.iter().map(usize::to_string).collect();
                 ps.join(" + ")
             })
             .collect();
-        format!("parts {} of the previous model joined", list.join(", "))
+        what.push(format!(
+            "parts {} of the previous model joined",
+            list.join(", ")
+        ));
+    }
+    for (p, jt) in &edit.joint_types {
+        let name = match jt {
+            JointType::Revolute => "revolute",
+            JointType::Prismatic => "prismatic",
+        };
+        what.push(format!("the joint of part {p} made {name}"));
+    }
+    let what = if what.is_empty() {
+        "nothing changed".to_string()
+    } else {
+        what.join(", ")
     };
     let plural = |n: usize| if n == 1 { "part" } else { "parts" };
     notes.push(format!(

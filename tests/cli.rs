@@ -1,6 +1,6 @@
 //! The `gsart` binary end to end: `truth` + `eval` on bench-dev (the ground truth
 //! scores perfectly), `fit` + `eval` on an occluded bench-dev robot, `synth` writes a
-//! readable sequence, `articulate` re-poses a result, `edit` joins parts, bad input gives a one-line
+//! readable sequence, `articulate` re-poses a result, `edit` joins parts and chooses a joint's type, bad input gives a one-line
 //! error naming the file, an output that cannot be written fails before the fit, a
 //! reader closing the output pipe early is no crash, a poorly explained balanced fit
 //! is done again from another seed, and `bench` reports a sequence's metrics and its
@@ -210,7 +210,8 @@ fn synth_then_articulate() {
 }
 
 /// `gsart edit`: the laptop's ground truth with its lid joined to its base is one part
-/// without joints, written with its URDF and metrics; a join naming no part is one line.
+/// without joints, written with its URDF and metrics; a join naming no part is one line;
+/// `--joint-type` makes the lid's hinge a slide.
 #[test]
 fn edit_joins_parts() {
     let dir = tmp("edit");
@@ -254,6 +255,43 @@ fn edit_joins_parts() {
         "{err}"
     );
     assert_eq!(err.trim().lines().count(), 1, "{err}");
+    // The lid's hinge made a slide: the result says so.
+    let (ok, _, err) = gsart(&[
+        "edit",
+        result.to_str().unwrap(),
+        seq.to_str().unwrap(),
+        "--joint-type",
+        "1=prismatic",
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(ok, "{err}");
+    let r = gsart::io::result::FitResult::from_json(
+        &std::fs::read_to_string(&out).unwrap(),
+        "slide.json",
+    )
+    .unwrap();
+    let joints = r.joints.unwrap();
+    assert_eq!(joints.len(), 1);
+    assert_eq!(
+        joints[0].joint_type,
+        gsart::io::gt::JointType::Prismatic,
+        "{err}"
+    );
+    let (ok, _, err) = gsart(&[
+        "edit",
+        result.to_str().unwrap(),
+        seq.to_str().unwrap(),
+        "--joint-type",
+        "1=hinge",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && err.contains("--joint-type 1=hinge: expected PART=revolute"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -4,7 +4,7 @@
 //! Both start from a procedural object's ground truth written as a result (its true
 //! labels and poses), so what is checked is Steps 2–3 and the edit, not Step 1.
 
-use gsart::edit::{join_map, join_parts};
+use gsart::edit::{apply, join_map, Edit};
 use gsart::io::result::FitResult;
 use gsart::pipeline::{evaluate, Control};
 use gsart::synth::{generate, ObjectKind, SynthOptions, SynthOutput};
@@ -27,6 +27,21 @@ fn truth(kind: ObjectKind, seed: u64) -> (SynthOutput, FitResult) {
 
 fn clock() -> f64 {
     0.0
+}
+
+/// `edit::apply` with joins only.
+fn join_parts(
+    seq: &gsart::io::sequence::Sequence,
+    r: &FitResult,
+    groups: &[Vec<usize>],
+    clock: &dyn Fn() -> f64,
+    cb: &mut dyn FnMut(&gsart::pipeline::Progress) -> Control,
+) -> gsart::Result<gsart::pipeline::FitOutput> {
+    let edit = Edit {
+        join: groups.to_vec(),
+        ..Default::default()
+    };
+    apply(seq, r, &edit, clock, cb)
 }
 
 /// With the true segmentation and part poses but no tree, Steps 2–3 find the arm's
@@ -146,11 +161,75 @@ fn edits_that_cannot_apply_are_refused() {
         .unwrap_err()
         .contains("two or more"));
     // Joining everything leaves one part and no joint.
-    let one = join_parts(&out.sequence, &r, &[vec![0, 1]], &clock, &mut |_| {
-        Control::Continue
-    })
-    .expect("one part");
+    let all = Edit {
+        join: vec![vec![0, 1]],
+        ..Default::default()
+    };
+    let one = apply(&out.sequence, &r, &all, &clock, &mut |_| Control::Continue).expect("one part");
     assert_eq!(one.result.parts, 1);
     assert!(one.result.joints.as_ref().is_none_or(|j| j.is_empty()));
     assert!(one.result.labels.iter().flatten().all(|&l| l == 0));
+}
+
+/// A joint type chosen by hand is the type the joint gets, and the other joints keep
+/// theirs; choosing the true type again gives the hinge back within the bar. The root
+/// has no joint to give a type.
+#[test]
+fn a_joint_type_chosen_by_hand_is_kept() {
+    use gsart::io::gt::JointType;
+    let (out, r) = truth(ObjectKind::Cabinet, 0);
+    let joints = r.joints.clone().expect("joints");
+    let door = joints
+        .iter()
+        .find(|j| j.joint_type == JointType::Revolute)
+        .expect("the door's hinge")
+        .child;
+    let run = |r: &FitResult, jt: JointType| {
+        let edit = Edit {
+            joint_types: vec![(door, jt)],
+            ..Default::default()
+        };
+        apply(&out.sequence, r, &edit, &clock, &mut |_| Control::Continue)
+    };
+    let slid = run(&r, JointType::Prismatic).expect("edit").result;
+    let types = |r: &FitResult| -> Vec<(usize, JointType)> {
+        let mut t: Vec<_> = r
+            .joints
+            .iter()
+            .flatten()
+            .map(|j| (j.child, j.joint_type))
+            .collect();
+        t.sort_by_key(|x| x.0);
+        t
+    };
+    let expected: Vec<_> = types(&r)
+        .into_iter()
+        .map(|(c, t)| (c, if c == door { JointType::Prismatic } else { t }))
+        .collect();
+    assert_eq!(types(&slid), expected);
+    let edits = &slid.info.as_ref().expect("info")["edits"];
+    assert_eq!(
+        edits[0]["joint_types"],
+        serde_json::json!([[door, "prismatic"]])
+    );
+    let back = run(&slid, JointType::Revolute).expect("edit back").result;
+    assert_eq!(types(&back), types(&r));
+    let m = evaluate(&back, &out.sequence, &out.gt).expect("evaluate");
+    let j = m.joints.as_ref().expect("joint errors");
+    assert_eq!(j.within_bar, 3, "{j:?}");
+    let root = r.tree.as_ref().expect("tree").root;
+    let e = apply(
+        &out.sequence,
+        &r,
+        &Edit {
+            joint_types: vec![(root, JointType::Prismatic)],
+            ..Default::default()
+        },
+        &clock,
+        &mut |_| Control::Continue,
+    )
+    .map(|_| ())
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("root"), "{e}");
 }

@@ -8,7 +8,7 @@
 //               {id, type: 'finish', m, frames, names, options, gt?, labels?}  (Steps 2–3 on candidate m)
 //               {id, type: 'copy', m}     (candidate m as bytes, for another worker; kept here too)
 //               {id, type: 'put', bytes}  (a candidate another worker copied, to finish here)
-//               {id, type: 'edit', frames, names, result, joins, gt?, labels?}  (parts joined, Steps 2–3 again)
+//               {id, type: 'edit', frames, names, result, edit, gt?, labels?}  (edited by hand, Steps 2–3 again)
 // Messages out: {id, type: 'progress', ...} (≤ ~20/s), {id, type: 'result', ...}, {id, type: 'error', message}
 // Cancel: the page terminates the worker (a running wasm loop cannot read messages).
 import init, * as gsart from './pkg/gsart.js';
@@ -80,8 +80,8 @@ async function handle(msg) {
       const result = msg.type === 'finish'
         // Steps 2–3 on a candidate this worker holds (fitted here, or copied here by 'put').
         ? gsart.finish(msg.frames, msg.names, msg.m, msg.candidates, (p) => postProgress(id, p))
-        // A result edited by hand: parts joined, then Steps 2–3 again.
-        : gsart.edit_join(msg.frames, msg.names, msg.result, msg.joins, (p) => postProgress(id, p));
+        // A result edited by hand (parts joined, joint types chosen), then Steps 2–3 again.
+        : gsart.edit_model(msg.frames, msg.names, msg.result, msg.edit, (p) => postProgress(id, p));
       let metrics = null;
       let metricsError = null;
       if (msg.gt) {

@@ -68,8 +68,9 @@ mod cli {
             outputs: OutputArgs,
         },
         /// Edit a fitted model by hand: join parts into one (e.g. the two pieces of a
-        /// link, or a joint that should not be there: its child and its parent), then
-        /// build the tree and the joints again on the sequence it was fitted to.
+        /// link, or a joint that should not be there: its child and its parent) or
+        /// choose a joint's type, then build the tree and the joints again on the
+        /// sequence it was fitted to.
         Edit {
             /// The result to edit (JSON from `gsart fit`, the page or another tool).
             result: PathBuf,
@@ -81,6 +82,10 @@ mod cli {
             /// simply done again on RESULT's segmentation and poses.
             #[arg(long, value_name = "A,B[,...]")]
             join: Vec<String>,
+            /// Give the joint whose child is part P (by its number in RESULT) this type,
+            /// e.g. `--joint-type 5=prismatic`; repeat for more joints.
+            #[arg(long, value_name = "P=revolute|prismatic")]
+            joint_type: Vec<String>,
             #[command(flatten)]
             outputs: OutputArgs,
         },
@@ -228,10 +233,10 @@ mod cli {
                 result,
                 input,
                 join,
+                joint_type,
                 outputs,
-            } => parse_joins(&join).and_then(|groups| {
-                edit(&result, &input, &groups, &outputs.outputs()?, outputs.quiet)
-            }),
+            } => parse_edit(&join, &joint_type)
+                .and_then(|e| edit(&result, &input, &e, &outputs.outputs()?, outputs.quiet)),
             Command::Eval { result, seq_dir } => eval(&result, &seq_dir),
             Command::Truth {
                 seq_dir,
@@ -788,6 +793,33 @@ mod cli {
         outputs.write(&seq, &output, gt.as_ref(), t0)
     }
 
+    /// `--join 3,5 --join 7,8 --joint-type 2=prismatic` → the edit.
+    fn parse_edit(joins: &[String], types: &[String]) -> Result<gsart::edit::Edit> {
+        use gsart::io::gt::JointType;
+        let joint_types = types
+            .iter()
+            .map(|t| {
+                let bad = || {
+                    Error::InvalidArgument(format!(
+                        "--joint-type {t}: expected PART=revolute or PART=prismatic, e.g. 5=prismatic"
+                    ))
+                };
+                let (p, jt) = t.split_once('=').ok_or_else(bad)?;
+                let p = p.trim().parse::<usize>().map_err(|_| bad())?;
+                let jt = match jt.trim() {
+                    "revolute" => JointType::Revolute,
+                    "prismatic" => JointType::Prismatic,
+                    _ => return Err(bad()),
+                };
+                Ok((p, jt))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(gsart::edit::Edit {
+            join: parse_joins(joins)?,
+            joint_types,
+        })
+    }
+
     /// `--join 3,5 --join 7,8` → `[[3, 5], [7, 8]]`.
     fn parse_joins(joins: &[String]) -> Result<Vec<Vec<usize>>> {
         joins
@@ -809,7 +841,7 @@ mod cli {
     fn edit(
         result: &Path,
         input: &[PathBuf],
-        groups: &[Vec<usize>],
+        e: &gsart::edit::Edit,
         outputs: &Outputs,
         quiet: bool,
     ) -> Result<()> {
@@ -819,7 +851,7 @@ mod cli {
         let (seq, gt) = load(input)?;
         let mut bar = Bar::new(quiet, Vec::new());
         let clock = move || t0.elapsed().as_secs_f64();
-        let output = gsart::edit::join_parts(&seq, &old, groups, &clock, &mut |p| {
+        let output = gsart::edit::apply(&seq, &old, e, &clock, &mut |p| {
             bar.show(p);
             Control::Continue
         })?;

@@ -100,6 +100,9 @@ pub struct KinOptions {
     /// they form no cycle (`tree::spanning_tree_keeping`) and the root stays the root,
     /// so joining parts contracts the tree instead of building another.
     pub keep_tree: Option<(usize, Vec<(usize, usize)>)>,
+    /// Joint types chosen by hand (`crate::edit`): (input part, type) gives the joint
+    /// whose child is that part (after merging) the type, instead of the type rule.
+    pub joint_types: Vec<(usize, JointType)>,
 }
 
 impl Default for KinOptions {
@@ -118,6 +121,7 @@ impl Default for KinOptions {
             absorb_invisible: true,
             restart_pairs: true,
             keep_tree: None,
+            joint_types: Vec::new(),
         }
     }
 }
@@ -806,6 +810,16 @@ pub fn build_articulated(
         }
         let tb = clock();
         progress_to(progress, Stage::Tree, 2, 3, vec![])?;
+        let mut given_types = vec![None; parts];
+        for &(p, jt) in &opts.joint_types {
+            if let Some(t) = merged
+                .map
+                .get(p)
+                .and_then(|&m| given_types.get_mut(m as usize))
+            {
+                *t = Some(jt);
+            }
+        }
         let (mut result, residuals) = project_joints(
             &merged.poses,
             &parent,
@@ -813,6 +827,7 @@ pub fn build_articulated(
             &extents,
             new_labels,
             opts.limit_pad,
+            &given_types,
         )?;
         let tc = clock();
         tree_s += tb - ta;

@@ -11,7 +11,7 @@ use glam::DMat4;
 use serde::Serialize;
 
 use super::chain::screw_exp;
-use super::screw::{fit_screw, one_dof_loss, padded_limits, PartExtent};
+use super::screw::{fit_screw_as, one_dof_loss, padded_limits, PartExtent};
 use crate::geom::se3::{rigid_inverse, to_row_major};
 use crate::io::gt::JointType;
 use crate::io::result::{FitResult, ResultJoint, ResultTree, FORMAT, VERSION};
@@ -54,7 +54,9 @@ pub fn bfs_order(parent: &[i64]) -> Vec<usize> {
 /// (exactly one root, −1). `extents[p]`: centroid and radius of part p at frame c (places pivots,
 /// scales the type test).
 /// `limit_pad`: joint limits are [min, max] of the states widened by this fraction of
-/// their range on each side. Returns the complete result (labels as given) and the
+/// their range on each side. `given_types[p]`: the type of the joint whose child is p
+/// when chosen by hand (`crate::edit`), else decided by the type rule (`None`, or an
+/// empty slice for all). Returns the complete result (labels as given) and the
 /// per-joint residuals.
 pub fn project_joints(
     poses: &[Vec<DMat4>],
@@ -63,6 +65,7 @@ pub fn project_joints(
     extents: &[PartExtent],
     labels: Vec<Vec<u32>>,
     limit_pad: f64,
+    given_types: &[Option<JointType>],
 ) -> crate::Result<(FitResult, Vec<JointResidual>)> {
     let n = parent.len();
     let k = poses.len();
@@ -86,7 +89,7 @@ pub fn project_joints(
         let rel: Vec<DMat4> = (0..k)
             .map(|t| rigid_inverse(&fk[t][a]) * observed[t][b])
             .collect();
-        let mut fit = fit_screw(&rel, extents[b]);
+        let mut fit = fit_screw_as(&rel, extents[b], given_types.get(b).copied().flatten());
         fit.states[canonical] = 0.0;
         let loss = one_dof_loss(&rel, fit.joint_type, fit.axis, fit.pivot, &fit.states);
         for (f, &s) in fk.iter_mut().zip(&fit.states) {
@@ -167,6 +170,7 @@ mod tests {
             &[PartExtent::default(); 3],
             vec![vec![]; k],
             0.0,
+            &[],
         )
         .unwrap();
         assert!(resid.iter().all(|r| r.loss < 1e-18));

@@ -444,9 +444,27 @@ pub fn fit_prismatic(rel: &[DMat4]) -> (DVec3, Vec<f64>, f64) {
 /// the pair is treated as revolute if it rotates at all (max angle > 1e-3 rad) and
 /// prismatic otherwise.
 pub fn fit_screw(rel: &[DMat4], child: PartExtent) -> ScrewFit {
+    fit_screw_as(rel, child, None)
+}
+
+/// [`fit_screw`] with the type given (`Some`, a joint type chosen by hand,
+/// `crate::edit`) instead of decided by the type rule.
+pub fn fit_screw_as(rel: &[DMat4], child: PartExtent, given: Option<JointType>) -> ScrewFit {
     let reference = child.centre;
     let (ra, rp, rs, rl) = fit_revolute(rel, reference);
     let (pa, ps, pl) = fit_prismatic(rel);
+    if let Some(jt) = given {
+        let revolute = jt == JointType::Revolute;
+        return ScrewFit {
+            joint_type: jt,
+            axis: if revolute { ra } else { pa },
+            pivot: if revolute { rp } else { reference },
+            states: if revolute { rs } else { ps },
+            loss: if revolute { rl } else { pl },
+            loss_revolute: rl,
+            loss_prismatic: pl,
+        };
+    }
     let tie = (rl - pl).abs() <= 1e-9 + 1e-6 * rl.max(pl);
     let rotates = rel
         .iter()

@@ -307,34 +307,25 @@ pub fn finish(
     Ok(out.result.to_json())
 }
 
-/// A fitted result (JSON) edited by hand (`edit::join_parts`): the parts of each group
-/// of `groups` (an array of arrays of part numbers; none for Steps 2–3 again as they
-/// are) joined into one, and the tree and joints built again on `frames` (the frames
-/// it was fitted to). Returns the edited result's JSON.
+/// A fitted result (JSON) edited by hand (`edit::apply`): `edit` is
+/// `{join: [[a, b, …], …], joint_types: [[part, "revolute"|"prismatic"], …]}` (either
+/// may be left out), in the result's part numbers; the tree and joints are built again
+/// on `frames` (the frames it was fitted to). Returns the edited result's JSON.
 #[wasm_bindgen]
-pub fn edit_join(
+pub fn edit_model(
     frames: Array,
     names: Array,
     result_json: &str,
-    groups: Array,
+    edit: JsValue,
     on_progress: &Function,
 ) -> Result<String, JsError> {
     let seq = sequence_from_js(&frames, &names)?;
     let old = FitResult::from_json(result_json, "result").map_err(js_err)?;
-    let mut joins = Vec::with_capacity(groups.length() as usize);
-    for g in groups.iter() {
-        let parts = Array::from(&g)
-            .iter()
-            .map(|p| match p.as_f64() {
-                Some(x) if x >= 0.0 && x.fract() == 0.0 => Ok(x as usize),
-                _ => Err(JsError::new(&format!("join: {p:?} is not a part number"))),
-            })
-            .collect::<Result<Vec<usize>, JsError>>()?;
-        joins.push(parts);
-    }
+    let edit: crate::edit::Edit = serde_wasm_bindgen::from_value(edit)
+        .map_err(|e| JsError::new(&format!("invalid edit: {e}")))?;
     let mut throttle = Throttle::new(on_progress);
     let clock = || js_sys::Date::now() / 1000.0;
-    let out = crate::edit::join_parts(&seq, &old, &joins, &clock, &mut |p| throttle.report(p))
+    let out = crate::edit::apply(&seq, &old, &edit, &clock, &mut |p| throttle.report(p))
         .map_err(js_err)?;
     Ok(out.result.to_json())
 }

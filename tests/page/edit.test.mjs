@@ -1,8 +1,9 @@
-// Editing a model by hand (www/js/app.js `joinParts`, the core's `edit_join`): the
+// Editing a model by hand (www/js/app.js `editModel`, the core's `edit_model`): the
 // fitted laptop's hinge joined away in a worker gives one part and no joint, with the
-// metrics against the example's ground truth; "Undo join" puts the fitted model back
-// exactly; a join can be cancelled; an edited model is not shared as the example's
-// fit; a model whose frames are not loaded offers no join.
+// metrics against the example's ground truth; "Undo edit" puts the fitted model back
+// exactly; "Make prismatic" makes the hinge a slide; a join can be cancelled; an
+// edited model is not shared as the example's fit; a model whose frames are not loaded
+// offers no edit.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { startServer, launch, newPage, waitLoaded } from './helpers.mjs';
@@ -71,6 +72,16 @@ test('joining the hinge leaves one part; undo puts the fit back', { timeout: 300
   assert.equal(await page.locator('#btn-undo-edit').isVisible(), false);
   assert.equal(await page.locator('.joint .jjoin').count(), 1);
 
+  // The hinge made a slide, and back by undo.
+  await page.locator('.joint .jtype').click();
+  await page.waitForFunction(() => window.gsart.state.model?.joints()[0]?.type === 'prismatic' && !window.gsart.state.editJob,
+    null, { timeout: 120_000 });
+  assert.match(await page.locator('#toast').innerText(), /Joint 1 made prismatic in [\d.]+ s/);
+  assert.equal(await page.locator('.joint .jtype').innerText(), 'Make revolute');
+  assert.deepEqual((await modelState()).json.info.edits.at(-1).joint_types, [[fitted.json.joints[0].child, 'prismatic']]);
+  await page.locator('#btn-undo-edit').click();
+  assert.deepEqual((await modelState()).json.joints, fitted.json.joints);
+
   // A join cancelled while it runs leaves the model as it was.
   await page.locator('.joint .jjoin').click();
   await page.locator('#btn-cancel-edit').click();
@@ -94,7 +105,7 @@ test('a model whose frames are not loaded offers no join', { timeout: 120_000 },
   await waitLoaded(other.page);
   await other.page.waitForSelector('#explore:not([hidden])');
   assert.equal(await other.page.locator('.joint').count(), 1);
-  assert.equal(await other.page.locator('.joint .jjoin').count(), 0);
+  assert.equal(await other.page.locator('.joint .jedits').count(), 0);
   assert.deepEqual(other.errors, []);
   await other.context.close();
 });

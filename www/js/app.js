@@ -1029,17 +1029,32 @@ function renderResult(extra = {}) {
     slider.addEventListener('blur', () => highlightPart(null));
     row.addEventListener('mouseenter', () => highlightPart(j.child));
     row.addEventListener('mouseleave', () => highlightPart(null));
-    row.append(sw, title, val);
+    row.append(sw, title, val, detail, slider);
     if (canEdit()) {
-      const join = document.createElement('button');
-      join.className = 'button small jjoin';
-      join.textContent = 'Join';
-      join.title = `No joint here: make part ${j.child} one rigid part with part ${j.parent}, then build the tree and the joints again`;
-      join.setAttribute('aria-label', `Join part ${j.child} to part ${j.parent}`);
-      join.addEventListener('click', () => joinParts(j.parent, j.child));
-      row.append(join);
+      // Edits by hand: each builds the tree and the joints again (`editModel`).
+      const edits = document.createElement('div');
+      edits.className = 'jedits';
+      const button = (cls, text, tip, label, onClick) => {
+        const b = document.createElement('button');
+        b.className = `button small ${cls}`;
+        b.textContent = text;
+        b.title = tip;
+        b.setAttribute('aria-label', label);
+        b.addEventListener('click', onClick);
+        edits.append(b);
+      };
+      const other = j.type === 'revolute' ? 'prismatic' : 'revolute';
+      button('jtype', `Make ${other}`,
+        `Fit this joint as a ${other === 'prismatic' ? 'slide' : 'hinge'} instead, then refine the joints again`,
+        `Make joint ${idx + 1} ${other}`,
+        () => editModel({ joint_types: [[j.child, other]] }, `Making joint ${idx + 1} ${other}`,
+          `Joint ${idx + 1} made ${other}`));
+      button('jjoin', 'Join', `No joint here: make part ${j.child} one rigid part with part ${j.parent}, then build the tree and the joints again`,
+        `Join part ${j.child} to part ${j.parent}`,
+        () => editModel({ join: [[j.parent, j.child]] }, `Joining part ${j.child} to part ${j.parent}`,
+          `Parts ${j.parent} and ${j.child} joined`));
+      row.append(edits);
     }
-    row.append(detail, slider);
     row._fmt = fmtState;
     row._unit = unit;
     list.appendChild(row);
@@ -1066,26 +1081,30 @@ function editStatus(html) {
   $('edit-text').innerHTML = html || '';
 }
 
+function editButtons(enabled) {
+  for (const b of document.querySelectorAll('.jedits button')) b.disabled = !enabled;
+}
+
 /**
- * Joins part `child` to part `parent` (a joint that should not be there, or two
- * pieces of one link): the core's `edit_join` in a worker builds the tree and the
- * joints again on the loaded frames, keeping the rest of the tree. The model before
- * goes on the undo history.
+ * Edits the model by hand: `edit` is the core's `edit::Edit` (`join`: parts to make
+ * one, e.g. a joint that should not be there or two pieces of one link; `joint_types`:
+ * a joint's type). The core's `edit_model` in a worker builds the tree and the joints
+ * again on the loaded frames, keeping the rest of the tree. The model before goes on
+ * the undo history. `doing` and `done` name the edit in the status line and the toast.
  */
-async function joinParts(parent, child) {
+async function editModel(edit, doing, done) {
   if (!canEdit() || S.editJob) return;
   stopPlay();
   const good = goodFrames();
   const before = { text: S.model.to_json(false), source: S.modelSource, extra: S.resultExtra };
   const gtOk = S.gt && good.length === S.frames.length && good.every((f) => f.labels);
   const frames = good.map((f) => f.points.slice());
-  const what = `Joining part ${child} to part ${parent}`;
-  editStatus(`${escapeHtml(what)}: building the tree and the joints again…`);
-  for (const b of document.querySelectorAll('.jjoin')) b.disabled = true;
+  editStatus(`${escapeHtml(doing)}: building the tree and the joints again…`);
+  editButtons(false);
   const t0 = performance.now();
   const job = new WorkerJob(
     {
-      type: 'edit', frames, names: good.map((f) => f.name), result: before.text, joins: [[parent, child]],
+      type: 'edit', frames, names: good.map((f) => f.name), result: before.text, edit,
       gt: gtOk ? S.gt : null, labels: gtOk ? good.map((f) => f.labels) : null,
     },
     frames.map((a) => a.buffer),
@@ -1093,7 +1112,7 @@ async function joinParts(parent, child) {
       if (msg.type !== 'progress' || S.editJob !== job) return;
       const step = msg.stage === 'joints' ? `refining the joints ${msg.iter}/${msg.total}`
         : msg.stage === 'metrics' ? 'metrics' : 'building the tree';
-      editStatus(`${escapeHtml(what)}: ${step}…`);
+      editStatus(`${escapeHtml(doing)}: ${step}…`);
     },
   );
   S.editJob = job;
@@ -1109,13 +1128,13 @@ async function joinParts(parent, child) {
     }
     const n = S.model.joints().length;
     editStatus('');
-    toast(`Parts ${parent} and ${child} joined in ${((performance.now() - t0) / 1000).toFixed(1)} s: `
+    toast(`${done} in ${((performance.now() - t0) / 1000).toFixed(1)} s: `
       + `${old} → ${S.model.parts()} parts, ${n} joint${n === 1 ? '' : 's'}.`, '', 5000);
   } catch (e) {
     if (S.editJob === job) S.editJob = null;
     editStatus('');
-    for (const b of document.querySelectorAll('.jjoin')) b.disabled = false;
-    if (!(e instanceof CancelledError)) toast(`Could not join the parts: ${errText(e)}`, 'error', 9000);
+    editButtons(true);
+    if (!(e instanceof CancelledError)) toast(`Could not edit the model: ${errText(e)}`, 'error', 9000);
   }
 }
 
@@ -1480,7 +1499,7 @@ function wire() {
     S.editJob?.cancel();
     S.editJob = null;
     editStatus('');
-    for (const b of document.querySelectorAll('.jjoin')) b.disabled = false;
+    editButtons(true);
   });
   $('btn-export-json').addEventListener('click', exportJson);
   $('btn-export-ply').addEventListener('click', exportPly);
