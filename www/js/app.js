@@ -1123,7 +1123,10 @@ async function editModel(edit, doing, done) {
     const old = S.model.parts();
     S.undo.push(before);
     if (!openResult(r.result, S.seqName, 'edit', { ...before.extra, metrics: r.metrics, metricsError: r.metricsError })) {
+      // openResult said why; the model before is still on view.
       S.undo.pop();
+      editStatus('');
+      editButtons(true);
       return;
     }
     const n = S.model.joints().length;
