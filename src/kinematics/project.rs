@@ -183,5 +183,23 @@ mod tests {
                 assert!(from_row_major(r).abs_diff_eq(*m, 1e-9));
             }
         }
+        // A type given by hand is the type the joint gets, with its own (worse) fit.
+        let given = [None, Some(JointType::Prismatic), None];
+        let (typed, resid) = project_joints(
+            &poses,
+            &[-1, 0, 1],
+            0,
+            &[PartExtent::default(); 3],
+            vec![vec![]; k],
+            0.0,
+            &given,
+        )
+        .unwrap();
+        let joints = typed.joints.as_ref().unwrap();
+        assert_eq!(joints[0].joint_type, JointType::Prismatic);
+        assert!(
+            resid[0].loss > 1e-6,
+            "a hinge fitted as a slide leaves a residual"
+        );
     }
 }

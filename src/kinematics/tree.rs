@@ -200,6 +200,45 @@ mod tests {
         assert_eq!(reroot(&[-1, 0, 1], 2), vec![1, 2, -1]);
     }
 
+    /// Kept edges come first whatever they cost; one that would close a cycle with
+    /// them is left out and the costs connect the rest.
+    #[test]
+    fn kept_edges_come_before_the_costs() {
+        // Costs make the chain 0 - 1 - 2 - 3 (1 - 2 the cheapest); keep 0 - 2 (costly)
+        // and 2 - 3.
+        let n = 4;
+        let mut spatial = vec![1.0; n * n];
+        for (i, j, c) in [(0, 1, 1e-4), (1, 2, 1e-5), (2, 3, 1e-4)] {
+            spatial[i * n + j] = c;
+            spatial[j * n + i] = c;
+        }
+        let costs = PairCosts {
+            parts: n,
+            spatial,
+            one_dof: vec![0.0; n * n],
+            fits: vec![None; n * n],
+        };
+        assert_eq!(spanning_tree(&costs, 0), vec![-1, 0, 1, 2]);
+        assert_eq!(
+            spanning_tree_keeping(&costs, 0, &[(2, 0), (2, 3)]),
+            vec![-1, 2, 0, 2]
+        );
+        // Three kept edges close the cycle 0 - 2 - 3: two of them stay, and part 1
+        // joins by one of its cheap edges.
+        let parent = spanning_tree_keeping(&costs, 0, &[(0, 2), (2, 3), (0, 3)]);
+        let edge = |c: usize| (c.min(parent[c] as usize), c.max(parent[c] as usize));
+        let edges: Vec<(usize, usize)> = (1..n).map(edge).collect();
+        let kept = edges
+            .iter()
+            .filter(|e| [(0, 2), (2, 3), (0, 3)].contains(e))
+            .count();
+        assert_eq!(kept, 2, "{parent:?}");
+        assert!(
+            edges.contains(&(0, 1)) || edges.contains(&(1, 2)),
+            "{parent:?}"
+        );
+    }
+
     #[test]
     fn root_is_least_moving_part() {
         let poses: Vec<Vec<DMat4>> = (0..4)
