@@ -245,6 +245,14 @@ pub fn apply(
             serde_json::json!({"changed": relabelled, "seconds": relabel_s}),
         ),
         ("unexplained", serde_json::json!(unexplained.map(|u| u.0))),
+        (
+            "unexplained_seconds",
+            serde_json::json!(unexplained.map_or(0.0, |u| u.1)),
+        ),
+        (
+            "invisible_joints",
+            serde_json::json!(crate::pipeline::invisible_joints(&kin)),
+        ),
         ("symmetry_turns", serde_json::json!(kin.flips)),
         ("joint_sweeps", serde_json::json!(kin.swept)),
         ("parallel_axes", serde_json::json!(kin.parallel)),

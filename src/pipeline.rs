@@ -906,7 +906,7 @@ pub(crate) fn kin_notes(kin: &crate::kinematics::KinReport) -> Vec<String> {
 }
 
 /// Joints Steps 2–3 absorbed into their parent because the clouds do not show them.
-fn invisible_joints(kin: &crate::kinematics::KinReport) -> usize {
+pub(crate) fn invisible_joints(kin: &crate::kinematics::KinReport) -> usize {
     kin.merge_log
         .iter()
         .filter(|e| e.kind == "invisible")

@@ -1,6 +1,7 @@
 // Module worker running one job of the core (wasm): parsing PLY files, generating a
-// built-in example, one Step-1 candidate (one part count m), or finishing (model
-// selection + Steps 2–3 + metrics). Results go back as transferable typed arrays.
+// built-in example, one Step-1 candidate (one part count m), finishing (model
+// selection + Steps 2–3 + metrics), or a model edited by hand (Steps 2–3 again +
+// metrics). Results go back as transferable typed arrays.
 //
 // Messages in:  {id, type: 'parse', files: [{name, bytes: ArrayBuffer}]}
 //               {id, type: 'example', name, seed}
