@@ -11,7 +11,8 @@
 //! options as the fit's. A joint's type can be chosen too (the page's "Make prismatic"
 //! / "Make revolute", `gsart edit --joint-type 5=prismatic`): the type rule of
 //! `kinematics::screw` decides from the clouds, which one-sided views can fool (an
-//! occluded gripper's slides come out as hinges). With no edit at all it runs Steps 2–3 on any result's
+//! occluded gripper's slides come out as hinges). So can the root (the URDF's base
+//! link): Step 2 takes the part that moves least, which need not be the base. With no edit at all it runs Steps 2–3 on any result's
 //! segmentation and poses (one from another tool, or a ground truth written by
 //! `gsart truth`).
 
@@ -80,6 +81,10 @@ pub struct Edit {
     /// (part, type): the joint whose child is that part (joined, if it is) gets the type.
     #[serde(default)]
     pub joint_types: Vec<(usize, JointType)>,
+    /// The part to make the root (the URDF's base link); the joints on the way from the
+    /// old root to it turn round, parent for child.
+    #[serde(default)]
+    pub root: Option<usize>,
 }
 
 /// The result `old` with `edit` applied, and Steps 2–3 done again on `seq` (the
@@ -115,7 +120,21 @@ pub fn apply(
         }
     }
     let (map, parts) = join_map(old.parts, groups)?;
-    let joint_types = joint_types(old, &map, &edit.joint_types)?;
+    let root = match edit.root {
+        Some(r) if r >= old.parts => {
+            return Err(crate::Error::InvalidArgument(format!(
+                "root: part {r} does not exist (the result has parts 0–{})",
+                old.parts - 1
+            )))
+        }
+        Some(r) => Some(map[r] as usize),
+        None => old.tree.as_ref().map(|t| map[t.root] as usize),
+    };
+    // The old joints keep their types (a hinge turned round is still a hinge; the type
+    // rule, tuned on joints pointing away from the least moving part, can disagree),
+    // and the types given by hand come after them, so they win.
+    let mut types = kept_types(old, &map, edit.root, root);
+    types.extend(joint_types(old, &map, root, &edit.joint_types)?);
     let canonical = old.canonical_frame;
     let info = old.info.as_ref();
     let occluded = match info.and_then(|i| i.get("occlusion_used")) {
@@ -178,16 +197,20 @@ pub fn apply(
     // for, not the rest of the model (the pair costs only connect what the joins leave
     // unconnected).
     let mut kin_opts = crate::pipeline::kin_options(occluded);
-    kin_opts.keep_tree = old.tree.as_ref().map(|t| {
-        let edges = t
-            .parent
-            .iter()
-            .enumerate()
-            .filter_map(|(c, &p)| Some((map[c] as usize, map[usize::try_from(p).ok()?] as usize)))
-            .collect();
-        (map[t.root] as usize, edges)
+    // A root chosen for a result without a tree roots the tree the costs build.
+    kin_opts.keep_tree = root.map(|root| {
+        let edges = old.tree.as_ref().map_or_else(Vec::new, |t| {
+            t.parent
+                .iter()
+                .enumerate()
+                .filter_map(|(c, &p)| {
+                    Some((map[c] as usize, map[usize::try_from(p).ok()?] as usize))
+                })
+                .collect()
+        });
+        (root, edges)
     });
-    kin_opts.joint_types = joint_types;
+    kin_opts.joint_types = types;
     let (mut result, kin) = crate::kinematics::build_articulated(
         &points, &labels, &poses, canonical, &kin_opts, clock, cb,
     )?;
@@ -233,6 +256,7 @@ pub fn apply(
     edits.push(serde_json::json!({
         "join": groups,
         "joint_types": edit.joint_types,
+        "root": edit.root,
         "parts_before": old.parts,
         "parts_after": result.parts,
         "occlusion_used": occluded,
@@ -279,12 +303,49 @@ fn part_counts(labels: &[u32], parts: usize) -> Vec<usize> {
     n
 }
 
+/// The old joints' types, for Steps 2–3's input parts (`map`: old part → joined
+/// part): each for the joint between the same two parts after the edit, whose child is
+/// the old parent where the new root (`new_root`, old numbering) turns the joint round.
+/// Joints inside a joined part, and any that would type the root (`root`, joined), are
+/// left out.
+fn kept_types(
+    old: &FitResult,
+    map: &[u32],
+    new_root: Option<usize>,
+    root: Option<usize>,
+) -> Vec<(usize, JointType)> {
+    let Some(tree) = &old.tree else {
+        return Vec::new();
+    };
+    // The joints on the way from the new root up to the old root turn round.
+    let mut turned = vec![false; old.parts];
+    let mut x = new_root.unwrap_or(tree.root);
+    while let Some(p) = tree.parent.get(x).and_then(|&p| usize::try_from(p).ok()) {
+        if turned[x] {
+            break; // not a tree
+        }
+        turned[x] = true;
+        x = p;
+    }
+    old.joints
+        .iter()
+        .flatten()
+        .filter(|j| j.child < old.parts && j.parent < old.parts && map[j.child] != map[j.parent])
+        .map(|j| {
+            let child = if turned[j.child] { j.parent } else { j.child };
+            (map[child] as usize, j.joint_type)
+        })
+        .filter(|&(c, _)| Some(c) != root)
+        .collect()
+}
+
 /// The joint types of `given` (old part numbers) for Steps 2–3's input parts (`map`:
-/// old part → joined part). A part that is the root of the old tree (or joined to it)
-/// has no joint to give a type.
+/// old part → joined part). The root (`root`, a joined part, if known) has no joint to
+/// give a type.
 fn joint_types(
     old: &FitResult,
     map: &[u32],
+    root: Option<usize>,
     given: &[(usize, JointType)],
 ) -> crate::Result<Vec<(usize, JointType)>> {
     let bad = |m: String| crate::Error::InvalidArgument(m);
@@ -296,12 +357,10 @@ fn joint_types(
                 old.parts.saturating_sub(1)
             )));
         };
-        if let Some(t) = &old.tree {
-            if map[t.root] == n {
-                return Err(bad(format!(
-                    "joint type of part {p}: it is the root (or joined to it), which has no joint"
-                )));
-            }
+        if root == Some(n as usize) {
+            return Err(bad(format!(
+                "joint type of part {p}: it is the root (or joined to it), which has no joint"
+            )));
         }
         out.push((n as usize, jt));
     }
@@ -349,6 +408,9 @@ fn edited_notes(old: &FitResult, edit: &Edit, kin_notes: &[String], parts: usize
             JointType::Prismatic => "prismatic",
         };
         what.push(format!("the joint of part {p} made {name}"));
+    }
+    if let Some(r) = edit.root {
+        what.push(format!("part {r} made the root"));
     }
     let what = if what.is_empty() {
         "nothing changed".to_string()

@@ -1,6 +1,6 @@
 //! The `gsart` binary end to end: `truth` + `eval` on bench-dev (the ground truth
 //! scores perfectly), `fit` + `eval` on an occluded bench-dev robot, `synth` writes a
-//! readable sequence, `articulate` re-poses a result, `edit` joins parts and chooses a joint's type, bad input gives a one-line
+//! readable sequence, `articulate` re-poses a result, `edit` joins parts and chooses a joint's type and the root, bad input gives a one-line
 //! error naming the file, an output that cannot be written fails before the fit, a
 //! reader closing the output pipe early is no crash, a poorly explained balanced fit
 //! is done again from another seed, and `bench` reports a sequence's metrics and its
@@ -211,7 +211,7 @@ fn synth_then_articulate() {
 
 /// `gsart edit`: the laptop's ground truth with its lid joined to its base is one part
 /// without joints, written with its URDF and metrics; a join naming no part is one line;
-/// `--joint-type` makes the lid's hinge a slide.
+/// `--joint-type` makes the lid's hinge a slide; `--root` turns the hinge round.
 #[test]
 fn edit_joins_parts() {
     let dir = tmp("edit");
@@ -292,6 +292,27 @@ fn edit_joins_parts() {
         !ok && err.contains("--joint-type 1=hinge: expected PART=revolute"),
         "{err}"
     );
+    // The lid made the root: the hinge turns round.
+    let (ok, _, err) = gsart(&[
+        "edit",
+        result.to_str().unwrap(),
+        seq.to_str().unwrap(),
+        "--root",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(ok, "{err}");
+    let r = gsart::io::result::FitResult::from_json(
+        &std::fs::read_to_string(&out).unwrap(),
+        "rooted.json",
+    )
+    .unwrap();
+    assert_eq!(r.tree.as_ref().unwrap().root, 1);
+    let j = &r.joints.as_ref().unwrap()[0];
+    assert_eq!((j.parent, j.child), (1, 0));
+    assert_eq!(j.joint_type, gsart::io::gt::JointType::Revolute);
 }
 
 #[test]

@@ -233,3 +233,37 @@ fn a_joint_type_chosen_by_hand_is_kept() {
     .to_string();
     assert!(e.contains("root"), "{e}");
 }
+
+/// A root chosen by hand (a foot of the quadruped, the URDF's base) turns the joints on
+/// the way round: the tree is rooted there, and every hinge is still a hinge in the
+/// bar (the old joints keep their types).
+#[test]
+fn a_root_chosen_by_hand_turns_the_tree_round() {
+    let (out, r) = truth(ObjectKind::Quadruped, 0);
+    let tree = r.tree.clone().expect("tree");
+    let foot = (0..r.parts)
+        .find(|&p| p != tree.root && !tree.parent.contains(&(p as i64)))
+        .expect("a foot");
+    let edit = Edit {
+        root: Some(foot),
+        ..Default::default()
+    };
+    let edited = apply(&out.sequence, &r, &edit, &clock, &mut |_| Control::Continue)
+        .expect("edit")
+        .result;
+    let new_tree = edited.tree.as_ref().expect("tree");
+    assert_eq!(new_tree.root, foot);
+    assert_eq!(edited.parts, r.parts);
+    // The foot's thigh is now the foot's child, and the body the thigh's.
+    let thigh = tree.parent[foot] as usize;
+    assert_eq!(new_tree.parent[thigh], foot as i64);
+    assert_eq!(new_tree.parent[tree.root], thigh as i64);
+    let m = evaluate(&edited, &out.sequence, &out.gt).expect("evaluate");
+    let j = m.joints.as_ref().expect("joint errors");
+    assert_eq!((j.found, j.type_correct, j.within_bar), (8, 8, 8), "{j:?}");
+    let bad = Edit {
+        root: Some(r.parts),
+        ..Default::default()
+    };
+    assert!(apply(&out.sequence, &r, &bad, &clock, &mut |_| Control::Continue).is_err());
+}

@@ -68,8 +68,8 @@ mod cli {
             outputs: OutputArgs,
         },
         /// Edit a fitted model by hand: join parts into one (e.g. the two pieces of a
-        /// link, or a joint that should not be there: its child and its parent) or
-        /// choose a joint's type, then build the tree and the joints again on the
+        /// link, or a joint that should not be there: its child and its parent), choose
+        /// a joint's type or the root, then build the tree and the joints again on the
         /// sequence it was fitted to.
         Edit {
             /// The result to edit (JSON from `gsart fit`, the page or another tool).
@@ -86,6 +86,9 @@ mod cli {
             /// e.g. `--joint-type 5=prismatic`; repeat for more joints.
             #[arg(long, value_name = "P=revolute|prismatic")]
             joint_type: Vec<String>,
+            /// Make part P (by its number in RESULT) the root: the URDF's base link.
+            #[arg(long, value_name = "P")]
+            root: Option<usize>,
             #[command(flatten)]
             outputs: OutputArgs,
         },
@@ -234,8 +237,9 @@ mod cli {
                 input,
                 join,
                 joint_type,
+                root,
                 outputs,
-            } => parse_edit(&join, &joint_type)
+            } => parse_edit(&join, &joint_type, root)
                 .and_then(|e| edit(&result, &input, &e, &outputs.outputs()?, outputs.quiet)),
             Command::Eval { result, seq_dir } => eval(&result, &seq_dir),
             Command::Truth {
@@ -793,8 +797,12 @@ mod cli {
         outputs.write(&seq, &output, gt.as_ref(), t0)
     }
 
-    /// `--join 3,5 --join 7,8 --joint-type 2=prismatic` → the edit.
-    fn parse_edit(joins: &[String], types: &[String]) -> Result<gsart::edit::Edit> {
+    /// `--join 3,5 --join 7,8 --joint-type 2=prismatic --root 4` → the edit.
+    fn parse_edit(
+        joins: &[String],
+        types: &[String],
+        root: Option<usize>,
+    ) -> Result<gsart::edit::Edit> {
         use gsart::io::gt::JointType;
         let joint_types = types
             .iter()
@@ -817,6 +825,7 @@ mod cli {
         Ok(gsart::edit::Edit {
             join: parse_joins(joins)?,
             joint_types,
+            root,
         })
     }
 

@@ -1,9 +1,9 @@
 // Editing a model by hand (www/js/app.js `editModel`, the core's `edit_model`): the
 // fitted laptop's hinge joined away in a worker gives one part and no joint, with the
 // metrics against the example's ground truth; "Undo edit" puts the fitted model back
-// exactly; "Make prismatic" makes the hinge a slide; a join can be cancelled; an
-// edited model is not shared as the example's fit; a model whose frames are not loaded
-// offers no edit.
+// exactly; "Make prismatic" makes the hinge a slide; the lid made the root turns the
+// hinge round; a join can be cancelled; an edited model is not shared as the example's
+// fit; a model whose frames are not loaded offers no edit.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { startServer, launch, newPage, waitLoaded } from './helpers.mjs';
@@ -80,6 +80,25 @@ test('joining the hinge leaves one part; undo puts the fit back', { timeout: 300
   assert.equal(await page.locator('.joint .jtype').innerText(), 'Make revolute');
   assert.deepEqual((await modelState()).json.info.edits.at(-1).joint_types, [[fitted.json.joints[0].child, 'prismatic']]);
   await page.locator('#btn-undo-edit').click();
+  assert.deepEqual((await modelState()).json.joints, fitted.json.joints);
+
+  // The lid made the root: the hinge turns round (the base is now its child), and
+  // stays a hinge.
+  const lid = fitted.json.joints[0].child;
+  const base = fitted.json.joints[0].parent;
+  assert.equal(await page.locator('#root-part').inputValue(), String(base));
+  await page.selectOption('#root-part', String(lid));
+  await page.waitForFunction((lid) => window.gsart.state.model?.root() === lid && !window.gsart.state.editJob,
+    lid, { timeout: 120_000 });
+  const rooted = await modelState();
+  assert.equal(rooted.json.joints.length, 1);
+  assert.equal(rooted.json.joints[0].parent, lid);
+  assert.equal(rooted.json.joints[0].child, base);
+  assert.equal(rooted.json.joints[0].type, 'revolute');
+  assert.equal(rooted.json.info.edits.at(-1).root, lid);
+  assert.equal(await page.locator('#root-part').inputValue(), String(lid));
+  await page.locator('#btn-undo-edit').click();
+  assert.equal(await page.locator('#root-part').inputValue(), String(base));
   assert.deepEqual((await modelState()).json.joints, fitted.json.joints);
 
   // A join cancelled while it runs leaves the model as it was.

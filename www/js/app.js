@@ -1061,6 +1061,16 @@ function renderResult(extra = {}) {
   });
 
   $('btn-undo-edit').hidden = !S.undo.length;
+  const rootSel = $('root-part');
+  $('root-edit').hidden = !canEdit() || m.parts() < 2;
+  rootSel.disabled = !!S.editJob;
+  rootSel.replaceChildren(...Array.from({ length: m.parts() }, (_, p) => {
+    const o = document.createElement('option');
+    o.value = String(p);
+    o.textContent = `part ${p}`;
+    o.selected = parent.length > 0 && p === m.root();
+    return o;
+  }));
   // Metrics
   renderMetrics();
 }
@@ -1082,7 +1092,9 @@ function editStatus(html) {
 }
 
 function editButtons(enabled) {
-  for (const b of document.querySelectorAll('.jedits button')) b.disabled = !enabled;
+  for (const b of document.querySelectorAll('.jedits button, #root-part')) b.disabled = !enabled;
+  // An edit that did not happen leaves the root as it is.
+  if (enabled && S.model?.has_tree()) $('root-part').value = String(S.model.root());
 }
 
 /**
@@ -1498,6 +1510,10 @@ function wire() {
   $('btn-screenshot').addEventListener('click', exportPng);
   $('btn-reset-joints').addEventListener('click', () => { if (S.model) showFrame(S.current); });
   $('btn-undo-edit').addEventListener('click', undoEdit);
+  $('root-part').addEventListener('change', (e) => {
+    const p = Number(e.target.value);
+    editModel({ root: p }, `Making part ${p} the root`, `Part ${p} made the root`);
+  });
   $('btn-cancel-edit').addEventListener('click', () => {
     S.editJob?.cancel();
     S.editJob = null;
