@@ -216,99 +216,54 @@ fn synth_then_articulate() {
 fn edit_joins_parts() {
     let dir = tmp("edit");
     let (seq, result) = laptop_truth(&dir);
-    let (out, urdf) = (dir.join("joined.json"), dir.join("joined.urdf"));
-    let (ok, _, err) = gsart(&[
-        "edit",
-        result.to_str().unwrap(),
-        seq.to_str().unwrap(),
-        "--join",
-        "0,1",
-        "--out",
-        out.to_str().unwrap(),
-        "--urdf",
-        urdf.to_str().unwrap(),
-        "--quiet",
-    ]);
-    assert!(ok, "{err}");
+    let (out, urdf) = (dir.join("edited.json"), dir.join("joined.urdf"));
+    // `gsart edit RESULT SEQ ARGS… --out OUT`: success, stderr, and the edited result.
+    let edit = |args: &[&str]| {
+        let mut all = vec![
+            "edit",
+            result.to_str().unwrap(),
+            seq.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        all.extend_from_slice(args);
+        let (ok, _, err) = gsart(&all);
+        let r = ok.then(|| {
+            gsart::io::result::FitResult::from_json(
+                &std::fs::read_to_string(&out).unwrap(),
+                "edited.json",
+            )
+            .unwrap()
+        });
+        (r, err)
+    };
+    let (r, err) = edit(&["--join", "0,1", "--urdf", urdf.to_str().unwrap(), "--quiet"]);
+    let r = r.unwrap_or_else(|| panic!("{err}"));
     assert!(
         err.contains("2 parts → 1 part") && err.contains("metrics:"),
         "{err}"
     );
-    let r = gsart::io::result::FitResult::from_json(
-        &std::fs::read_to_string(&out).unwrap(),
-        "joined.json",
-    )
-    .unwrap();
     assert_eq!(r.parts, 1);
     assert!(std::fs::read_to_string(&urdf).unwrap().contains("<robot"));
-    let (ok, _, err) = gsart(&[
-        "edit",
-        result.to_str().unwrap(),
-        seq.to_str().unwrap(),
-        "--join",
-        "0,7",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let (r, err) = edit(&["--join", "0,7"]);
     assert!(
-        !ok && err.starts_with("gsart: ") && err.contains("part 7 does not exist"),
+        r.is_none() && err.starts_with("gsart: ") && err.contains("part 7 does not exist"),
         "{err}"
     );
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     // The lid's hinge made a slide: the result says so.
-    let (ok, _, err) = gsart(&[
-        "edit",
-        result.to_str().unwrap(),
-        seq.to_str().unwrap(),
-        "--joint-type",
-        "1=prismatic",
-        "--out",
-        out.to_str().unwrap(),
-        "--quiet",
-    ]);
-    assert!(ok, "{err}");
-    let r = gsart::io::result::FitResult::from_json(
-        &std::fs::read_to_string(&out).unwrap(),
-        "slide.json",
-    )
-    .unwrap();
-    let joints = r.joints.unwrap();
+    let (r, err) = edit(&["--joint-type", "1=prismatic", "--quiet"]);
+    let joints = r.unwrap_or_else(|| panic!("{err}")).joints.unwrap();
     assert_eq!(joints.len(), 1);
-    assert_eq!(
-        joints[0].joint_type,
-        gsart::io::gt::JointType::Prismatic,
-        "{err}"
-    );
-    let (ok, _, err) = gsart(&[
-        "edit",
-        result.to_str().unwrap(),
-        seq.to_str().unwrap(),
-        "--joint-type",
-        "1=hinge",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    assert_eq!(joints[0].joint_type, gsart::io::gt::JointType::Prismatic);
+    let (r, err) = edit(&["--joint-type", "1=hinge"]);
     assert!(
-        !ok && err.contains("--joint-type 1=hinge: expected PART=revolute"),
+        r.is_none() && err.contains("--joint-type 1=hinge: expected PART=revolute"),
         "{err}"
     );
     // The lid made the root: the hinge turns round.
-    let (ok, _, err) = gsart(&[
-        "edit",
-        result.to_str().unwrap(),
-        seq.to_str().unwrap(),
-        "--root",
-        "1",
-        "--out",
-        out.to_str().unwrap(),
-        "--quiet",
-    ]);
-    assert!(ok, "{err}");
-    let r = gsart::io::result::FitResult::from_json(
-        &std::fs::read_to_string(&out).unwrap(),
-        "rooted.json",
-    )
-    .unwrap();
+    let (r, err) = edit(&["--root", "1", "--quiet"]);
+    let r = r.unwrap_or_else(|| panic!("{err}"));
     assert_eq!(r.tree.as_ref().unwrap().root, 1);
     let j = &r.joints.as_ref().unwrap()[0];
     assert_eq!((j.parent, j.child), (1, 0));
