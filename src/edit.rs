@@ -169,17 +169,17 @@ pub fn apply(
         .collect();
     // A joined part moves as the least-squares rigid motion of its pieces' points; a
     // part with too few points for that keeps its largest piece's motion.
+    // (Step 2's rule for merged parts, `merge::largest_member`.)
     let counts = part_counts(&old_labels[canonical], old.parts);
-    let mut largest = vec![None::<usize>; parts];
-    for p in 0..old.parts {
-        let n = map[p] as usize;
-        if largest[n].is_none_or(|q| counts[p] > counts[q]) {
-            largest[n] = Some(p);
-        }
-    }
+    let largest: Vec<usize> = (0..parts)
+        .map(|n| {
+            let members: Vec<usize> = (0..old.parts).filter(|&p| map[p] as usize == n).collect();
+            crate::kinematics::merge::largest_member(&members, &counts)
+        })
+        .collect();
     let fallback: Vec<Vec<DMat4>> = old_poses
         .iter()
-        .map(|f| largest.iter().map(|q| f[q.unwrap_or(0)]).collect())
+        .map(|f| largest.iter().map(|&q| f[q]).collect())
         .collect();
     let poses = crate::kinematics::observed::observed_motion(
         &points[canonical],
@@ -261,32 +261,16 @@ pub fn apply(
         "parts_after": result.parts,
         "occlusion_used": occluded,
     }));
-    for (key, value) in [
-        ("edits", serde_json::json!(edits)),
-        ("kinematics_seconds", serde_json::json!(kin.timings)),
-        (
-            "relabel",
-            serde_json::json!({"changed": relabelled, "seconds": relabel_s}),
-        ),
-        ("unexplained", serde_json::json!(unexplained.map(|u| u.0))),
-        (
-            "unexplained_seconds",
-            serde_json::json!(unexplained.map_or(0.0, |u| u.1)),
-        ),
-        (
-            "invisible_joints",
-            serde_json::json!(crate::pipeline::invisible_joints(&kin)),
-        ),
-        ("symmetry_turns", serde_json::json!(kin.flips)),
-        ("joint_sweeps", serde_json::json!(kin.swept)),
-        ("parallel_axes", serde_json::json!(kin.parallel)),
-        ("half_turns", serde_json::json!(kin.half_turns)),
-        ("refine", serde_json::json!(kin.refine)),
-        ("notes", serde_json::json!(notes)),
-        ("kinematics_notes", serde_json::json!(kin_notes)),
-    ] {
-        info.insert(key.to_string(), value);
-    }
+    // Steps 2–3's keys are the new ones, as a fit writes them.
+    info.extend(crate::pipeline::kin_info(
+        &kin,
+        relabelled,
+        relabel_s,
+        unexplained,
+        &kin_notes,
+    ));
+    info.insert("edits".into(), serde_json::json!(edits));
+    info.insert("notes".into(), serde_json::json!(notes));
     result.info = Some(serde_json::Value::Object(info));
     result.validate("edited result")?;
     Ok(FitOutput { result, kin, notes })

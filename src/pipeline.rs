@@ -703,7 +703,6 @@ pub fn finish(
     // a point's part is hidden in many frames: RI 0.745 → 0.741, the rest unchanged.
     let (relabelled, unexplained, relabel_s) =
         relabel_full(seq, &mut result, norm.scale, step1.occlusion_used, clock);
-    let coverage_s = unexplained.map_or(0.0, |u| u.1);
     result.points = Some(
         seq.frames[canonical]
             .points
@@ -826,7 +825,7 @@ pub fn finish(
     }
     let kinematics_notes = kin_notes(&kin);
     notes.extend(kinematics_notes.iter().cloned());
-    result.info = Some(serde_json::json!({
+    let mut info = serde_json::json!({
         "generator": concat!("gsart ", env!("CARGO_PKG_VERSION")),
         "m": step1.m,
         "candidates": step1.candidates,
@@ -840,21 +839,55 @@ pub fn finish(
         "working_sizes": working_sizes,
         "step1_seconds": step1.timings.total_s,
         "candidates_timing": step1.timings.per_candidate,
-        "kinematics_seconds": kin.timings,
-        "relabel": {"changed": relabelled, "seconds": relabel_s},
-        "unexplained": unexplained.map(|u| u.0),
-        "unexplained_seconds": coverage_s,
-        "symmetry_turns": kin.flips,
-        "joint_sweeps": kin.swept,
-        "invisible_joints": invisible_joints(&kin),
-        "parallel_axes": kin.parallel,
-        "half_turns": kin.half_turns,
-        "refine": kin.refine,
         "notes": notes,
-        "kinematics_notes": kinematics_notes,
-    }));
+    });
+    if let Some(o) = info.as_object_mut() {
+        o.extend(kin_info(
+            &kin,
+            relabelled,
+            relabel_s,
+            unexplained,
+            &kinematics_notes,
+        ));
+    }
+    result.info = Some(info);
     result.validate("result")?;
     Ok(FitOutput { result, kin, notes })
+}
+
+/// The result's `info` keys about Steps 2–3 and the relabelling after them (a fit's and
+/// an edit's, `crate::edit`, which replaces them): timings, points relabelled, the share
+/// unexplained (`relabel_full`), the repairs and their notes (`kin_notes`).
+pub(crate) fn kin_info(
+    kin: &crate::kinematics::KinReport,
+    relabelled: usize,
+    relabel_s: f64,
+    unexplained: Option<(f64, f64)>,
+    kinematics_notes: &[String],
+) -> serde_json::Map<String, serde_json::Value> {
+    use serde_json::json;
+    [
+        ("kinematics_seconds", json!(kin.timings)),
+        (
+            "relabel",
+            json!({"changed": relabelled, "seconds": relabel_s}),
+        ),
+        ("unexplained", json!(unexplained.map(|u| u.0))),
+        (
+            "unexplained_seconds",
+            json!(unexplained.map_or(0.0, |u| u.1)),
+        ),
+        ("symmetry_turns", json!(kin.flips)),
+        ("joint_sweeps", json!(kin.swept)),
+        ("invisible_joints", json!(invisible_joints(kin))),
+        ("parallel_axes", json!(kin.parallel)),
+        ("half_turns", json!(kin.half_turns)),
+        ("refine", json!(kin.refine)),
+        ("kinematics_notes", json!(kinematics_notes)),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect()
 }
 
 /// The notes about what Steps 2–3 repaired (symmetric parts turned, joints absorbed,
@@ -906,7 +939,7 @@ pub(crate) fn kin_notes(kin: &crate::kinematics::KinReport) -> Vec<String> {
 }
 
 /// Joints Steps 2–3 absorbed into their parent because the clouds do not show them.
-pub(crate) fn invisible_joints(kin: &crate::kinematics::KinReport) -> usize {
+fn invisible_joints(kin: &crate::kinematics::KinReport) -> usize {
     kin.merge_log
         .iter()
         .filter(|e| e.kind == "invisible")

@@ -248,7 +248,9 @@ pub fn merge_parts(
 }
 
 /// The member with the most points (ties: the first listed), whose pose a group takes.
-fn largest_member(members: &[usize], counts: &[usize]) -> usize {
+/// The member of a group with the most points (`counts[p]`), the first among equals:
+/// the part whose pose a merged group takes.
+pub(crate) fn largest_member(members: &[usize], counts: &[usize]) -> usize {
     let mut best = members[0];
     for &p in members {
         if counts[p] > counts[best] {

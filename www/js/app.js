@@ -93,6 +93,9 @@ function partColor(p) {
 
 function goodFrames() { return S.frames.filter((f) => f.points && !f.error); }
 
+/** Whether metrics can be computed for the frames `good`: ground truth, every frame loaded and labelled. */
+function hasTruth(good) { return !!S.gt && good.length === S.frames.length && good.every((f) => f.labels); }
+
 function safeName(s) { return (s || 'gsart').replace(/[^A-Za-z0-9._-]+/g, '_').replace(/^_+|_+$/g, '') || 'gsart'; }
 
 function setStepActive(step) {
@@ -647,7 +650,7 @@ async function startFit() {
   S.fitOpts = opts;
   stopPlay();
   resetResult();
-  const gtOk = S.gt && good.length === S.frames.length && good.every((f) => f.labels);
+  const gtOk = hasTruth(good);
   buildStages(!!gtOk);
   $('progress').hidden = false;
   $('step-fit').scrollIntoView({ block: 'start', behavior: 'smooth' });
@@ -1109,7 +1112,7 @@ async function editModel(edit, doing, done) {
   stopPlay();
   const good = goodFrames();
   const before = { text: S.model.to_json(false), source: S.modelSource, extra: S.resultExtra };
-  const gtOk = S.gt && good.length === S.frames.length && good.every((f) => f.labels);
+  const gtOk = hasTruth(good);
   const frames = good.map((f) => f.points.slice());
   editStatus(`${escapeHtml(doing)}: building the tree and the joints again…`);
   editButtons(false);

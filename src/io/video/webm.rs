@@ -196,11 +196,16 @@ fn id_bytes(id: u32) -> Vec<u8> {
 /// An element's data size as an EBML variable-length integer, in the fewest bytes (the
 /// all-ones value of each length is reserved for "unknown").
 fn push_size(out: &mut Vec<u8>, size: u64) {
-    let len = (1..=8u32)
-        .find(|&n| size < (1u64 << (7 * n)) - 1)
-        .unwrap_or(8);
+    let len = size_len(size);
     let marked = size | (1u64 << (7 * len));
     out.extend_from_slice(&marked.to_be_bytes()[8 - len as usize..]);
+}
+
+/// Bytes of `size` as an EBML variable-length integer ([`push_size`]).
+fn size_len(size: u64) -> u32 {
+    (1..=8u32)
+        .find(|&n| size < (1u64 << (7 * n)) - 1)
+        .unwrap_or(8)
 }
 
 /// An element's ID and data size; its `size` bytes of data follow.
@@ -211,9 +216,7 @@ fn header(out: &mut Vec<u8>, id: u32, size: u64) {
 
 /// The length of an element with `size` bytes of data.
 fn element_len(id: u32, size: u64) -> u64 {
-    let mut h = Vec::with_capacity(12);
-    header(&mut h, id, size);
-    h.len() as u64 + size
+    (id_bytes(id).len() as u32 + size_len(size)) as u64 + size
 }
 
 fn element(out: &mut Vec<u8>, id: u32, data: &[u8]) {
