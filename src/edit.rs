@@ -85,6 +85,23 @@ pub struct Edit {
     /// old root to it turn round, parent for child.
     #[serde(default)]
     pub root: Option<usize>,
+    /// Parts whose joints must move on their own: a coupling found by Steps 2–3
+    /// (`kinematics::mimic`, URDF `<mimic>`) that is not in the object. It stays
+    /// undone through later edits (`info.unlinked`). An edit that only unlinks changes
+    /// nothing else (Steps 2–3 are not done again).
+    #[serde(default)]
+    pub unlink: Vec<usize>,
+}
+
+impl Edit {
+    /// True when the edit only unlinks joints: then Steps 2–3 are not done again, and
+    /// the output's report is empty.
+    pub fn only_unlinks(&self) -> bool {
+        self.join.is_empty()
+            && self.joint_types.is_empty()
+            && self.root.is_none()
+            && !self.unlink.is_empty()
+    }
 }
 
 /// The result `old` with `edit` applied, and Steps 2–3 done again on `seq` (the
@@ -118,6 +135,9 @@ pub fn apply(
                 ),
             ));
         }
+    }
+    if edit.only_unlinks() {
+        return unlink_only(old, &edit.unlink);
     }
     let (map, parts) = join_map(old.parts, groups)?;
     let root = match edit.root {
@@ -211,6 +231,7 @@ pub fn apply(
         (root, edges)
     });
     kin_opts.joint_types = types;
+    kin_opts.unlinked = unlinked(old, &map, &edit.unlink)?;
     let (mut result, kin) = crate::kinematics::build_articulated(
         &points, &labels, &poses, canonical, &kin_opts, clock, cb,
     )?;
@@ -248,19 +269,18 @@ pub fn apply(
         Some(serde_json::Value::Object(o)) => o,
         _ => serde_json::Map::new(),
     };
-    let mut edits = info
-        .get("edits")
-        .and_then(|e| e.as_array())
-        .cloned()
-        .unwrap_or_default();
-    edits.push(serde_json::json!({
-        "join": groups,
-        "joint_types": edit.joint_types,
-        "root": edit.root,
-        "parts_before": old.parts,
-        "parts_after": result.parts,
-        "occlusion_used": occluded,
-    }));
+    record_edit(
+        &mut info,
+        serde_json::json!({
+            "join": groups,
+            "joint_types": edit.joint_types,
+            "root": edit.root,
+            "unlink": edit.unlink,
+            "parts_before": old.parts,
+            "parts_after": result.parts,
+            "occlusion_used": occluded,
+        }),
+    );
     // Steps 2–3's keys are the new ones, as a fit writes them.
     info.extend(crate::pipeline::kin_info(
         &kin,
@@ -269,11 +289,101 @@ pub fn apply(
         unexplained,
         &kin_notes,
     ));
-    info.insert("edits".into(), serde_json::json!(edits));
+    let mut still_unlinked: Vec<usize> = kin_opts
+        .unlinked
+        .iter()
+        .map(|&p| kin.merge_map.get(p).map_or(p, |&m| m as usize))
+        .collect();
+    still_unlinked.sort_unstable();
+    still_unlinked.dedup();
+    info.insert("unlinked".into(), serde_json::json!(still_unlinked));
     info.insert("notes".into(), serde_json::json!(notes));
     result.info = Some(serde_json::Value::Object(info));
     result.validate("edited result")?;
     Ok(FitOutput { result, kin, notes })
+}
+
+/// `old` with the joints of parts `unlink` freed from the joints they follow, and
+/// nothing else changed: a coupling does not enter the geometry (`kinematics::mimic`),
+/// so Steps 2–3 are not done again (they would not give back exactly the same model).
+/// The report of the returned output is empty.
+fn unlink_only(old: &FitResult, unlink: &[usize]) -> crate::Result<FitOutput> {
+    let (map, _) = join_map(old.parts, &[])?;
+    let mut unlinked = unlinked(old, &map, unlink)?;
+    unlinked.sort_unstable();
+    unlinked.dedup();
+    let mut result = old.clone();
+    for j in result.joints.iter_mut().flatten() {
+        if unlink.contains(&j.child) {
+            j.mimic = None;
+        }
+    }
+    let mut info = match old.info.clone() {
+        Some(serde_json::Value::Object(o)) => o,
+        _ => serde_json::Map::new(),
+    };
+    // The notes of the couplings undone go; the rest stay.
+    let coupled = |n: &str| {
+        unlink
+            .iter()
+            .any(|p| n.starts_with(&format!("the joint of part {p} follows the joint of part")))
+    };
+    let kept = |key: &str| -> Vec<String> {
+        info.get(key)
+            .and_then(|n| n.as_array())
+            .map(|a| {
+                a.iter()
+                    .filter_map(|s| s.as_str())
+                    .filter(|s| !coupled(s))
+                    .map(str::to_string)
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    let mut notes = kept("notes");
+    let kin_notes = kept("kinematics_notes");
+    let parts: Vec<String> = unlink.iter().map(usize::to_string).collect();
+    notes.push(format!(
+        "edited by hand: the joint of part {} unlinked from the joint it followed; nothing else changed",
+        parts.join(", part ")
+    ));
+    let occluded = info
+        .get("occlusion_used")
+        .cloned()
+        .unwrap_or(serde_json::Value::Null);
+    record_edit(
+        &mut info,
+        serde_json::json!({
+            "join": [],
+            "joint_types": [],
+            "root": null,
+            "unlink": unlink,
+            "parts_before": old.parts,
+            "parts_after": old.parts,
+            "occlusion_used": occluded,
+        }),
+    );
+    info.insert("unlinked".into(), serde_json::json!(unlinked));
+    info.insert("notes".into(), serde_json::json!(notes));
+    info.insert("kinematics_notes".into(), serde_json::json!(kin_notes));
+    result.info = Some(serde_json::Value::Object(info));
+    result.validate("edited result")?;
+    Ok(FitOutput {
+        result,
+        kin: Default::default(),
+        notes,
+    })
+}
+
+/// Appends `entry` to `info.edits` (one entry per edit by hand).
+fn record_edit(info: &mut serde_json::Map<String, serde_json::Value>, entry: serde_json::Value) {
+    let mut edits = info
+        .get("edits")
+        .and_then(|e| e.as_array())
+        .cloned()
+        .unwrap_or_default();
+    edits.push(entry);
+    info.insert("edits".into(), serde_json::json!(edits));
 }
 
 /// Points per part in one frame's labels.
@@ -351,6 +461,37 @@ fn joint_types(
     Ok(out)
 }
 
+/// Steps 2–3's input parts (`map`: old part → joined part) whose joints are kept free
+/// of couplings: the old result's (`info.unlinked`) and `given`'s, each of which must be
+/// the child of a joint that follows another.
+fn unlinked(old: &FitResult, map: &[u32], given: &[usize]) -> crate::Result<Vec<usize>> {
+    let joints = old.joints.as_deref().unwrap_or(&[]);
+    for &p in given {
+        if !joints.iter().any(|j| j.child == p && j.mimic.is_some()) {
+            return Err(crate::Error::InvalidArgument(format!(
+                "unlink part {p}: its joint does not follow another (no joint of the result has `mimic` with child {p})"
+            )));
+        }
+    }
+    let before: Vec<usize> = old
+        .info
+        .as_ref()
+        .and_then(|i| i.get("unlinked"))
+        .and_then(|u| u.as_array())
+        .map(|a| {
+            a.iter()
+                .filter_map(|v| v.as_u64())
+                .map(|v| v as usize)
+                .collect()
+        })
+        .unwrap_or_default();
+    Ok(before
+        .into_iter()
+        .chain(given.iter().copied())
+        .filter_map(|p| map.get(p).map(|&n| n as usize))
+        .collect())
+}
+
 /// The old result's notes without its notes about Steps 2–3, then the new Steps 2–3's,
 /// then one saying what was edited.
 fn edited_notes(old: &FitResult, edit: &Edit, kin_notes: &[String], parts: usize) -> Vec<String> {
@@ -395,6 +536,11 @@ fn edited_notes(old: &FitResult, edit: &Edit, kin_notes: &[String], parts: usize
     }
     if let Some(r) = edit.root {
         what.push(format!("part {r} made the root"));
+    }
+    for p in &edit.unlink {
+        what.push(format!(
+            "the joint of part {p} unlinked from the joint it followed"
+        ));
     }
     let what = if what.is_empty() {
         "nothing changed".to_string()

@@ -935,6 +935,16 @@ pub(crate) fn kin_notes(kin: &crate::kinematics::KinReport) -> Vec<String> {
             kin.swept
         ));
     }
+    for c in &kin.mimic {
+        notes.push(format!(
+            "the joint of part {} follows the joint of part {} (URDF mimic: multiplier {:.3}, offset {:.4}): in every frame its state lies on that line within {:.1} % of its range",
+            c.child,
+            c.leader,
+            c.multiplier,
+            c.offset,
+            100.0 * c.residual
+        ));
+    }
     notes
 }
 
@@ -1083,7 +1093,8 @@ pub fn evaluate(
 }
 
 /// Re-articulation: the canonical frame's points re-posed by forward kinematics with
-/// joint `states` (in the order of `result.joints`) and the root motion of `frame`
+/// joint `states` (in the order of `result.joints`; for a model with coupled joints,
+/// optionally the leaders' alone, see `kinematics::mimic`) and the root motion of `frame`
 /// (default: the canonical frame). The one code path of the page's sliders, the CLI's
 /// `articulate` and the metrics' re-animation (all through `kinematics::chain`).
 pub fn articulate(
@@ -1097,13 +1108,28 @@ pub fn articulate(
         .as_ref()
         .ok_or_else(|| bad("the result carries no points (key `points`)".into()))?;
     let joints = result.joints.as_deref().unwrap_or(&[]);
-    if states.len() != joints.len() {
+    // A model with coupled joints takes every joint's state, or the leaders' alone (the
+    // joints that follow none, in order), its followers then following them.
+    let leaders: Vec<&crate::io::result::ResultJoint> =
+        joints.iter().filter(|j| j.mimic.is_none()).collect();
+    let given: Vec<&crate::io::result::ResultJoint> = if states.len() == joints.len() {
+        joints.iter().collect()
+    } else if states.len() == leaders.len() {
+        leaders
+    } else if leaders.len() < joints.len() {
+        return Err(bad(format!(
+            "{} joint states given, the model has {} joints ({} without the ones that follow another)",
+            states.len(),
+            joints.len(),
+            leaders.len()
+        )));
+    } else {
         return Err(bad(format!(
             "{} joint states given, the model has {} joints",
             states.len(),
             joints.len()
         )));
-    }
+    };
     let frame = frame.unwrap_or(result.canonical_frame);
     if frame >= result.frames {
         return Err(bad(format!(
@@ -1113,11 +1139,14 @@ pub fn articulate(
     }
     let chain = crate::kinematics::chain::Chain::from_result(result)?;
     let mut part_states = vec![0.0; result.parts];
-    for (j, &q) in joints.iter().zip(states) {
+    for (j, &q) in given.iter().zip(states) {
         if !q.is_finite() {
             return Err(bad(format!("joint state {q} is not finite")));
         }
         part_states[j.child] = q;
+    }
+    if given.len() < joints.len() {
+        crate::kinematics::mimic::follow(joints, &mut part_states);
     }
     let root = result
         .root_pose(frame)

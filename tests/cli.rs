@@ -1,7 +1,8 @@
 //! The `gsart` binary end to end: `truth` + `eval` on bench-dev (the ground truth
 //! scores perfectly), `fit` + `eval` on an occluded bench-dev robot, `synth` writes a
-//! readable sequence, `articulate` re-poses a result, `edit` joins parts and chooses a joint's type and the root, bad input gives a one-line
-//! error naming the file, an output that cannot be written fails before the fit, a
+//! readable sequence, `articulate` re-poses a result, `edit` joins parts, chooses a
+//! joint's type and the root and refuses an unlink of a joint that follows none, bad
+//! input gives a one-line error naming the file, an output that cannot be written fails before the fit, a
 //! reader closing the output pipe early is no crash, a poorly explained balanced fit
 //! is done again from another seed, and `bench` reports a sequence's metrics and its
 //! joints in the bar.
@@ -268,6 +269,18 @@ fn edit_joins_parts() {
     let j = &r.joints.as_ref().unwrap()[0];
     assert_eq!((j.parent, j.child), (1, 0));
     assert_eq!(j.joint_type, gsart::io::gt::JointType::Revolute);
+    // The laptop's one hinge follows no other joint: nothing to unlink.
+    let (r, err) = edit(&["--unlink", "1"]);
+    assert!(
+        r.is_none() && err.contains("unlink part 1: its joint does not follow another"),
+        "{err}"
+    );
+    let report = dir.join("kin.json");
+    let (r, err) = edit(&["--unlink", "1", "--report", report.to_str().unwrap()]);
+    assert!(
+        r.is_none() && err.contains("--report: an edit that only unlinks"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -267,3 +267,101 @@ fn a_root_chosen_by_hand_turns_the_tree_round() {
     };
     assert!(apply(&out.sequence, &r, &bad, &clock, &mut |_| Control::Continue).is_err());
 }
+
+/// The bench-dev panda gripper's two fingers slide together (their true states are
+/// equal): Steps 2–3 on its true segmentation and poses find the coupling (URDF
+/// `<mimic>`), re-posing with the leader's state alone moves both fingers, and an
+/// unlink frees the finger, changes nothing else and keeps it free through a later
+/// edit.
+#[test]
+fn coupled_fingers_are_found_and_can_be_unlinked() {
+    use gsart::io::gt::GroundTruth;
+    use gsart::io::sequence::Sequence;
+    let Some(dir) = ["../shared/bench-dev", "/work/shared/bench-dev"]
+        .iter()
+        .map(|b| std::path::Path::new(b).join("full/panda_gripper_00"))
+        .find(|d| d.join("gt.json").exists())
+    else {
+        eprintln!("skip: bench-dev not present");
+        return;
+    };
+    let seq = Sequence::from_dir(&dir).expect("frames");
+    let text = std::fs::read_to_string(dir.join("gt.json")).expect("gt.json");
+    let gt = GroundTruth::from_json(&text, "gt.json").expect("gt");
+    let labels = seq
+        .frames
+        .iter()
+        .map(|f| f.labels.clone().expect("labels"))
+        .collect();
+    let mut r = FitResult::from_ground_truth(&gt, labels, 0).expect("truth");
+    r.points = Some(seq.frames[0].points.iter().map(|p| p.to_array()).collect());
+    let run = |r: &FitResult, edit: &Edit| {
+        apply(&seq, r, edit, &clock, &mut |_| Control::Continue).map(|o| o.result)
+    };
+    let coupled = run(&r, &Edit::default()).expect("Steps 2–3");
+    let joints = coupled.joints.clone().expect("joints");
+    assert_eq!(joints.len(), 2);
+    let followers: Vec<_> = joints.iter().filter(|j| j.mimic.is_some()).collect();
+    assert_eq!(followers.len(), 1, "{joints:?}");
+    let (f, m) = (followers[0], followers[0].mimic.unwrap());
+    let leader = joints.iter().find(|j| j.child == m.joint).expect("leader");
+    assert!(leader.mimic.is_none());
+    // The fingers slide in opposite directions, so the axes decide the sign.
+    assert!((m.multiplier.abs() - 1.0).abs() < 0.05, "{m:?}");
+    assert!(m.offset.abs() < 0.01, "{m:?}");
+    let notes = coupled.info.as_ref().unwrap()["notes"].to_string();
+    assert!(notes.contains("URDF mimic"), "{notes}");
+
+    // The leader's state alone re-poses both fingers as giving both states does.
+    let q = 0.5 * (leader.limits[0] + leader.limits[1]);
+    let both: Vec<f64> = joints
+        .iter()
+        .map(|j| {
+            if j.child == f.child {
+                m.multiplier * q + m.offset
+            } else {
+                q
+            }
+        })
+        .collect();
+    let alone = gsart::pipeline::articulate(&coupled, &[q], None).expect("leader alone");
+    let given = gsart::pipeline::articulate(&coupled, &both, None).expect("both");
+    assert_eq!(alone, given);
+    let e = gsart::pipeline::articulate(&coupled, &[q, q, q], None).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("1 without the ones that follow another"),
+        "{e}"
+    );
+
+    // Unlinked, the finger moves on its own, and stays so through a later edit.
+    let unlink = Edit {
+        unlink: vec![f.child],
+        ..Default::default()
+    };
+    let free = run(&coupled, &unlink).expect("unlink");
+    assert!(free.joints.iter().flatten().all(|j| j.mimic.is_none()));
+    let info = free.info.as_ref().unwrap();
+    assert_eq!(info["unlinked"], serde_json::json!([f.child]));
+    assert!(!info["notes"].to_string().contains("URDF mimic"), "{info}");
+    // Nothing else changes: a coupling does not enter the geometry.
+    let mut back = free.clone();
+    for (j, c) in back.joints.iter_mut().flatten().zip(&joints) {
+        j.mimic = c.mimic;
+    }
+    assert_eq!(back.joints, coupled.joints);
+    assert_eq!(
+        (&free.labels, &free.poses, &free.tree),
+        (&coupled.labels, &coupled.poses, &coupled.tree)
+    );
+    let again = run(&free, &Edit::default()).expect("a later edit");
+    assert!(again
+        .joints
+        .as_ref()
+        .unwrap()
+        .iter()
+        .all(|j| j.mimic.is_none()));
+    // Only a joint that follows another can be unlinked.
+    let e = run(&free, &unlink).unwrap_err().to_string();
+    assert!(e.contains("does not follow another"), "{e}");
+}

@@ -14,6 +14,7 @@ use gsart::geom::se3::to_row_major;
 use gsart::io::result::FitResult;
 use gsart::io::urdf::{canonical_part_points, export, joint_name, link_name, Geometry};
 use gsart::kinematics::chain::Chain;
+use gsart::kinematics::mimic::follow;
 use gsart::kinematics::{build_articulated, KinOptions};
 use gsart::math::Libm;
 use gsart::pipeline::Control;
@@ -43,6 +44,8 @@ fn urdf_fk(text: &str, q: &HashMap<String, f64>) -> HashMap<String, DMat4> {
         child: String,
         origin: DMat4,
         axis: DVec3,
+        /// (leader joint, multiplier, offset) of a `<mimic>`.
+        mimic: Option<(String, f64, f64)>,
     }
     let mut joints = Vec::new();
     for j in robot.children().filter(|n| n.has_tag_name("joint")) {
@@ -74,6 +77,17 @@ fn urdf_fk(text: &str, q: &HashMap<String, f64>) -> HashMap<String, DMat4> {
             axis: get("axis")
                 .map(|a| parse3(a.attribute("xyz").unwrap()))
                 .unwrap_or(DVec3::X),
+            mimic: get("mimic").map(|m| {
+                let num = |a: &str| m.attribute(a).map_or(0.0, |v| v.parse().unwrap());
+                let mul = m
+                    .attribute("multiplier")
+                    .map_or(1.0, |v| v.parse().unwrap());
+                (
+                    m.attribute("joint").unwrap().to_string(),
+                    mul,
+                    num("offset"),
+                )
+            }),
         });
     }
     let children: Vec<&str> = joints.iter().map(|j| j.child.as_str()).collect();
@@ -92,7 +106,11 @@ fn urdf_fk(text: &str, q: &HashMap<String, f64>) -> HashMap<String, DMat4> {
             let Some(&wp) = pose.get(&j.parent) else {
                 continue;
             };
-            let v = q.get(&j.name).copied().unwrap_or(0.0);
+            // A mimic joint's value is its leader's, scaled and offset (URDF spec).
+            let v = match &j.mimic {
+                Some((lead, mul, off)) => mul * q.get(lead).copied().unwrap_or(0.0) + off,
+                None => q.get(&j.name).copied().unwrap_or(0.0),
+            };
             let m = match j.ty.as_str() {
                 "revolute" | "continuous" => DMat4::from_axis_angle(j.axis.normalize(), v),
                 "prismatic" => DMat4::from_translation(j.axis.normalize() * v),
@@ -153,12 +171,28 @@ fn expected(res: &FitResult, chain: &Chain, states: &[f64]) -> Vec<DMat4> {
         .collect()
 }
 
+/// The values a URDF reader is given, by joint name: every joint's but the followers'
+/// (their `<mimic>` must move them).
+fn leader_values(res: &FitResult, q: &[f64]) -> HashMap<String, f64> {
+    res.joints
+        .as_ref()
+        .unwrap()
+        .iter()
+        .filter(|j| j.mimic.is_none())
+        .map(|j| (joint_name(j.child), q[j.child]))
+        .collect()
+}
+
+/// Random joint states, each follower's then set from its leader's (a URDF reader
+/// moves a mimic joint with its leader whatever value it is given).
 fn random_states(res: &FitResult, rng: &mut StdRng) -> Vec<f64> {
     let mut q = vec![0.0; res.parts];
-    for j in res.joints.as_ref().unwrap() {
+    let joints = res.joints.as_ref().unwrap();
+    for j in joints {
         let (lo, hi) = (j.limits[0] - 0.5, j.limits[1] + 0.5);
         q[j.child] = rng.random_range(lo..hi);
     }
+    follow(joints, &mut q);
     q
 }
 
@@ -172,12 +206,15 @@ fn urdf_fk_matches_chain_fk() {
     let mut rng = StdRng::seed_from_u64(7);
     for (name, res, pts) in rs {
         let text = export(&res, &pts, &name, Geometry::Box, "").unwrap().urdf;
+        // The gripper's fingers move together (their true states are equal); no joint of
+        // the arm or the quadruped follows another.
+        let mimics = text.matches("<mimic ").count();
+        assert_eq!(mimics, usize::from(name.starts_with("panda")), "{name}");
         let chain = Chain::from_result(&res).unwrap();
         let mut worst: f64 = 0.0;
         for _ in 0..10 {
             let q = random_states(&res, &mut rng);
-            let named: HashMap<String, f64> =
-                (0..res.parts).map(|p| (joint_name(p), q[p])).collect();
+            let named = leader_values(&res, &q);
             let got = urdf_fk(&text, &named);
             let root = res.tree.as_ref().unwrap().root;
             for (p, e) in expected(&res, &chain, &q).iter().enumerate() {
@@ -260,13 +297,7 @@ fn urdf_loads_in_yourdfpy_with_matching_fk() {
         let solid = pts.iter().filter(|p| p.len() >= 4).count();
         assert_eq!(files.meshes.len(), solid, "{name}: a mesh per part");
         let q = random_states(&res, &mut rng);
-        let named: HashMap<String, f64> = res
-            .joints
-            .as_ref()
-            .unwrap()
-            .iter()
-            .map(|j| (joint_name(j.child), q[j.child]))
-            .collect();
+        let named = leader_values(&res, &q);
         let sfile = dir.join(format!("{name}.json"));
         std::fs::write(&sfile, serde_json::to_string(&named).unwrap()).unwrap();
         let out = std::process::Command::new("python3")

@@ -89,6 +89,10 @@ mod cli {
             /// Make part P (by its number in RESULT) the root: the URDF's base link.
             #[arg(long, value_name = "P")]
             root: Option<usize>,
+            /// The joint whose child is part P moves on its own: undo a coupling the fit
+            /// found (`mimic`, the URDF's `<mimic>`); repeat for more joints.
+            #[arg(long, value_name = "P")]
+            unlink: Vec<usize>,
             #[command(flatten)]
             outputs: OutputArgs,
         },
@@ -127,7 +131,8 @@ mod cli {
         /// Re-pose a fitted model with joint states and write the points as PLY.
         Articulate {
             result: PathBuf,
-            /// Joint states in the order of the result's `joints`, comma separated.
+            /// Joint states in the order of the result's `joints`, comma separated (a
+            /// model with coupled joints, `mimic`, takes the leaders' alone too).
             #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
             states: Vec<f64>,
             /// Use this frame's root motion (default: the canonical frame).
@@ -238,8 +243,9 @@ mod cli {
                 join,
                 joint_type,
                 root,
+                unlink,
                 outputs,
-            } => parse_edit(&join, &joint_type, root)
+            } => parse_edit(&join, &joint_type, root, unlink)
                 .and_then(|e| edit(&result, &input, &e, &outputs.outputs()?, outputs.quiet)),
             Command::Eval { result, seq_dir } => eval(&result, &seq_dir),
             Command::Truth {
@@ -797,11 +803,12 @@ mod cli {
         outputs.write(&seq, &output, gt.as_ref(), t0)
     }
 
-    /// `--join 3,5 --join 7,8 --joint-type 2=prismatic --root 4` → the edit.
+    /// `--join 3,5 --join 7,8 --joint-type 2=prismatic --root 4 --unlink 2` → the edit.
     fn parse_edit(
         joins: &[String],
         types: &[String],
         root: Option<usize>,
+        unlink: Vec<usize>,
     ) -> Result<gsart::edit::Edit> {
         use gsart::io::gt::JointType;
         let joint_types = types
@@ -826,6 +833,7 @@ mod cli {
             join: parse_joins(joins)?,
             joint_types,
             root,
+            unlink,
         })
     }
 
@@ -856,6 +864,11 @@ mod cli {
     ) -> Result<()> {
         let t0 = Instant::now();
         outputs.check()?;
+        if e.only_unlinks() && outputs.report.is_some() {
+            return Err(Error::InvalidArgument(
+                "--report: an edit that only unlinks joints does not build the tree and the joints again, so it has no report".into(),
+            ));
+        }
         let old = read_result(result)?;
         let (seq, gt) = load(input)?;
         let mut bar = Bar::new(quiet, Vec::new());

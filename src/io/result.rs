@@ -43,6 +43,18 @@ pub struct ResultJoint {
     /// State per frame; 0 at the canonical frame.
     pub state: Vec<f64>,
     pub limits: [f64; 2],
+    /// This joint follows another (URDF `<mimic>`; `kinematics::mimic`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mimic: Option<Mimic>,
+}
+
+/// A joint's coupling to a leader: `state = multiplier · leader's state + offset`.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+pub struct Mimic {
+    /// The leader, named by its child part (as joints are everywhere: `joint_P`).
+    pub joint: usize,
+    pub multiplier: f64,
+    pub offset: f64,
 }
 
 /// A fitted (or ground-truth-derived) articulated model of one sequence.
@@ -276,6 +288,7 @@ impl FitResult {
             let lo = state.iter().copied().fold(f64::INFINITY, f64::min);
             let hi = state.iter().copied().fold(f64::NEG_INFINITY, f64::max);
             joints.push(ResultJoint {
+                mimic: None,
                 child: j.part,
                 parent: j.parent_part,
                 joint_type: j.joint_type,

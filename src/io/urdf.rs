@@ -274,9 +274,20 @@ pub fn export(
                     JointType::Prismatic => "prismatic",
                 };
                 let axis = DVec3::from(j.axis).normalize_or(DVec3::Z);
+                // URDF joint values are the result's states (0 at the canonical frame,
+                // the links' frames posed there), so a coupling carries over as it is.
+                let mimic = match j.mimic {
+                    Some(m) if joint_of.get(m.joint).is_some_and(Option::is_some) => format!(
+                        "\n    <mimic joint=\"{}\" multiplier=\"{}\" offset=\"{}\"/>",
+                        joint_name(m.joint),
+                        m.multiplier,
+                        m.offset
+                    ),
+                    _ => String::new(),
+                };
                 let _ = writeln!(
                     s,
-                    "  <joint name=\"{}\" type=\"{ty}\">\n    <parent link=\"{}\"/>\n    <child link=\"{}\"/>\n    <origin xyz=\"{xyz}\" rpy=\"0 0 0\"/>\n    <axis xyz=\"{}\"/>\n    <limit lower=\"{}\" upper=\"{}\" effort=\"{EFFORT}\" velocity=\"{VELOCITY}\"/>\n  </joint>",
+                    "  <joint name=\"{}\" type=\"{ty}\">\n    <parent link=\"{}\"/>\n    <child link=\"{}\"/>\n    <origin xyz=\"{xyz}\" rpy=\"0 0 0\"/>\n    <axis xyz=\"{}\"/>\n    <limit lower=\"{}\" upper=\"{}\" effort=\"{EFFORT}\" velocity=\"{VELOCITY}\"/>{mimic}\n  </joint>",
                     joint_name(p),
                     link_name(a),
                     link_name(p),

@@ -11,6 +11,7 @@ use super::flips::Repair;
 use super::half_turns::settle_half_turns;
 use super::invisible_joints::invisible_joints;
 use super::merge::{absorb, merge_loss, merge_parts, MergeEvent, MergeOptions};
+use super::mimic::{apply as apply_couplings, find_couplings, Coupling};
 use super::observed::{
     keep_faithful_poses, object_size, observed_motion, points_by_part, polish_motions,
     polish_poses, AGREE_SPACINGS, POLISH_GAIN, POLISH_KEEP, POLISH_ROUNDS,
@@ -103,6 +104,11 @@ pub struct KinOptions {
     /// Joint types chosen by hand (`crate::edit`): (input part, type) gives the joint
     /// whose child is that part (after merging) the type, instead of the type rule.
     pub joint_types: Vec<(usize, JointType)>,
+    /// Find joints whose states follow another joint's (`kinematics::mimic`).
+    pub mimic: bool,
+    /// Input parts whose joints (after merging) are kept free of any coupling: unlinked
+    /// by hand (`crate::edit`).
+    pub unlinked: Vec<usize>,
 }
 
 impl Default for KinOptions {
@@ -122,6 +128,8 @@ impl Default for KinOptions {
             restart_pairs: true,
             keep_tree: None,
             joint_types: Vec::new(),
+            mimic: true,
+            unlinked: Vec::new(),
         }
     }
 }
@@ -129,7 +137,7 @@ impl Default for KinOptions {
 /// What Steps 2 and 3 found, for reports and debugging. Lengths and losses here are
 /// in the fit units Steps 2–3 ran in (see `crate::normalisation`; the result's
 /// `info.normalisation` gives the map).
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Default, Serialize)]
 pub struct KinReport {
     /// Input part → merged part.
     pub merge_map: Vec<u32>,
@@ -164,6 +172,8 @@ pub struct KinReport {
     /// Joints (by child part) proposed anew with their states half a turn off their
     /// path mended (`kinematics::half_turns`).
     pub half_turns: Vec<usize>,
+    /// Joints found to follow another (`kinematics::mimic`).
+    pub mimic: Vec<Coupling>,
     /// (stage, seconds) from the caller's clock.
     pub timings: Vec<(String, f64)>,
 }
@@ -966,6 +976,19 @@ pub fn build_articulated(
             POLISH_KEEP,
         );
     }
+    let mimic = if opts.mimic {
+        let unlinked: Vec<usize> = opts
+            .unlinked
+            .iter()
+            .filter_map(|&p| merged.map.get(p).map(|&m| m as usize))
+            .collect();
+        let joints = result.joints.get_or_insert_with(Vec::new);
+        let found = find_couplings(joints, object_size(&points[canonical]), &unlinked);
+        apply_couplings(joints, &found);
+        found
+    } else {
+        Vec::new()
+    };
     timings.push(("tree".to_string(), tree_s));
     timings.push(("projection".to_string(), proj_s));
     if opts.refine.is_some() {
@@ -991,6 +1014,7 @@ pub fn build_articulated(
         spin_free,
         parallel,
         half_turns,
+        mimic,
         timings,
     };
     Ok((result, report))
@@ -1004,6 +1028,7 @@ mod tests {
     fn still_joints_are_the_ones_that_do_not_move() {
         use crate::io::result::ResultJoint;
         let joint = |child, jt, state: Vec<f64>| ResultJoint {
+            mimic: None,
             child,
             parent: 0,
             joint_type: jt,

@@ -172,6 +172,7 @@ mod tests {
             info: None,
         };
         result.joints = Some(vec![ResultJoint {
+            mimic: None,
             child: 1,
             parent: 0,
             joint_type: JointType::Revolute,

@@ -213,6 +213,7 @@ mod tests {
             gaussians: None,
             tree: None,
             joints: Some(vec![ResultJoint {
+                mimic: None,
                 child: 1,
                 parent: 0,
                 joint_type: JointType::Revolute,

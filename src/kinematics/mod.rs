@@ -10,6 +10,7 @@ pub mod half_turns;
 pub mod invisible_joints;
 pub mod joint_sweep;
 pub mod merge;
+pub mod mimic;
 pub mod observed;
 pub mod parallel;
 pub mod project;

@@ -319,6 +319,7 @@ mod tests {
 
     fn joint(child: usize, parent: usize, t: JointType, axis: [f64; 3]) -> ResultJoint {
         ResultJoint {
+            mimic: None,
             child,
             parent,
             joint_type: t,
@@ -471,6 +472,7 @@ mod tests {
             })
             .collect();
         let mut joint = ResultJoint {
+            mimic: None,
             child: 1,
             parent: 0,
             joint_type: JointType::Revolute,

@@ -104,6 +104,7 @@ pub fn project_joints(
             loss_prismatic: fit.loss_prismatic,
         });
         joints.push(ResultJoint {
+            mimic: None,
             child: b,
             parent: a,
             joint_type: fit.joint_type,

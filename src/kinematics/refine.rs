@@ -731,6 +731,7 @@ mod tests {
         let labels: Vec<u32> = (0..n).map(|i| (i % 3) as u32).collect();
         let joints = vec![
             ResultJoint {
+                mimic: None,
                 child: 1,
                 parent: 0,
                 joint_type: JointType::Revolute,
@@ -740,6 +741,7 @@ mod tests {
                 limits: [-0.3, 0.4],
             },
             ResultJoint {
+                mimic: None,
                 child: 2,
                 parent: 1,
                 joint_type: JointType::Prismatic,
@@ -920,6 +922,7 @@ mod tests {
             labels.push(part as u32);
         }
         let hinge = |child: usize, x: f64, axis: DVec3, state: Vec<f64>| ResultJoint {
+            mimic: None,
             child,
             parent: 0,
             joint_type: JointType::Revolute,

@@ -375,6 +375,7 @@ mod tests {
                 parent: vec![-1, 0],
             }),
             joints: Some(vec![ResultJoint {
+                mimic: None,
                 child: 1,
                 parent: 0,
                 joint_type: JointType::Revolute,

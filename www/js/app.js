@@ -9,7 +9,7 @@ import { LossChart } from './chart.js';
 import { drawTree } from './tree.js';
 import { download, zip } from './save.js';
 import { FPS, recordVideo, videoSize, VideoUnsupported } from './video.js';
-import { jointMotion } from './motion.js';
+import { follow, jointMotion } from './motion.js';
 import { EMBED, setupEmbed, syncEmbed, withoutEmbed, iframeCode, readableUrl } from './embed.js';
 import { DEFAULTS, SETTING_KEYS, settingsFromParams, writeSettings, exampleSeed } from './settings.js';
 
@@ -964,6 +964,8 @@ function renderResult(extra = {}) {
   const nP = joints.length - nR;
   const bits = [`<strong>${m.parts()} parts</strong>`, `${joints.length} joint${joints.length === 1 ? '' : 's'}`];
   if (joints.length) bits.push([nR ? `${nR} revolute` : '', nP ? `${nP} prismatic` : ''].filter(Boolean).join(', '));
+  const nF = joints.filter((j) => j.mimic).length;
+  if (nF) bits.push(`${nF} following another (mimic)`);
   bits.push(`${m.frames()} frames`);
   let html = bits.join(' · ');
   if (extra.provisional) html = `<span class="msg-warn" id="provisional">${escapeHtml(extra.provisional)}</span><br>${html}`;
@@ -1012,6 +1014,16 @@ function renderResult(extra = {}) {
     const unit = j.type === 'revolute' ? '°' : '';
     const fmtState = (v) => (j.type === 'revolute' ? `${(v * 180 / Math.PI).toFixed(1)}°` : v.toFixed(3));
     detail.textContent = `${j.type} · axis (${ax}) · range ${fmtState(lo)} … ${fmtState(hi)}`;
+    // A joint that follows another (URDF mimic) moves with its leader's slider.
+    const leader = j.mimic ? joints.findIndex((x) => x.child === j.mimic.joint) : -1;
+    if (leader >= 0) {
+      const mul = j.mimic.multiplier, off = j.mimic.offset;
+      const offText = fmtState(Math.abs(off));
+      // An offset that rounds to nothing is left out.
+      const offPart = /[1-9]/.test(offText) ? ` ${off < 0 ? '−' : '+'} ${offText}` : '';
+      detail.textContent += ` · follows joint ${leader + 1}: ${mul.toFixed(3)} × its state${offPart}`;
+      row.classList.add('follower');
+    }
     const slider = document.createElement('input');
     slider.type = 'range';
     // A little room beyond the observed range, so the model can be explored.
@@ -1021,11 +1033,16 @@ function renderResult(extra = {}) {
     slider.step = String(span / 400);
     slider.setAttribute('aria-label', `Joint ${idx + 1} (${j.type}, part ${j.child})`);
     slider.dataset.child = String(j.child);
+    if (leader >= 0) {
+      slider.disabled = true;
+      slider.title = `Follows joint ${leader + 1}: move that joint's slider`;
+    }
     slider.addEventListener('input', () => {
       // Playing would put the frame's states back on the next frame.
       stopPlay();
       S.states[j.child] = Number(slider.value);
       val.textContent = fmtState(S.states[j.child]);
+      if (joints.some((x) => x.mimic?.joint === j.child)) { follow(joints, S.states); syncSliders(); }
       drawModel();
     });
     slider.addEventListener('focus', () => highlightPart(j.child));
@@ -1052,6 +1069,11 @@ function renderResult(extra = {}) {
         `Make joint ${idx + 1} ${other}`,
         () => editModel({ joint_types: [[j.child, other]] }, `Making joint ${idx + 1} ${other}`,
           `Joint ${idx + 1} made ${other}`));
+      if (leader >= 0) {
+        button('junlink', 'Unlink', `This joint moves on its own: it does not follow joint ${leader + 1}`,
+          `Unlink joint ${idx + 1} from joint ${leader + 1}`,
+          () => editModel({ unlink: [j.child] }, `Unlinking joint ${idx + 1}`, `Joint ${idx + 1} unlinked`));
+      }
       button('jjoin', 'Join', `No joint here: make part ${j.child} one rigid part with part ${j.parent}, then build the tree and the joints again`,
         `Join part ${j.child} to part ${j.parent}`,
         () => editModel({ join: [[j.parent, j.child]] }, `Joining part ${j.child} to part ${j.parent}`,
@@ -1114,7 +1136,9 @@ async function editModel(edit, doing, done) {
   const before = { text: S.model.to_json(false), source: S.modelSource, extra: S.resultExtra };
   const gtOk = hasTruth(good);
   const frames = good.map((f) => f.points.slice());
-  editStatus(`${escapeHtml(doing)}: building the tree and the joints again…`);
+  // Unlinking alone changes no geometry, so the core does not build the model again.
+  const onlyUnlink = edit.unlink && !edit.join && !edit.joint_types && edit.root === undefined;
+  editStatus(onlyUnlink ? `${escapeHtml(doing)}…` : `${escapeHtml(doing)}: building the tree and the joints again…`);
   editButtons(false);
   const t0 = performance.now();
   const job = new WorkerJob(

@@ -20,13 +20,28 @@ export function sweep(start, [lo, hi]) {
 }
 
 /**
- * The motion of `joints` (the model's, each `{child, limits}`) from the states `base`
+ * Every coupled joint's state (`mimic`: `{joint, multiplier, offset}`, the URDF's) set
+ * from its leader's, as the URDF moves it. `states` is indexed by child part; returned.
+ */
+export function follow(joints, states) {
+  for (const j of joints) {
+    if (j.mimic) states[j.child] = j.mimic.multiplier * states[j.mimic.joint] + j.mimic.offset;
+  }
+  return states;
+}
+
+/**
+ * The motion of `joints` (the model's, each `{child, limits}`, and `mimic` when it
+ * follows another joint) from the states `base`
  * (indexed by child part): `mode` 'joints' sweeps each in turn, 'together' all at once.
  * `seconds` is one loop; `at(t)` gives the states t seconds in (wrapping) and `moving`,
  * the child part of the joint that moves alone (-1 when all do).
  */
 export function jointMotion(joints, base, mode) {
-  const paths = joints.map((j) => ({ child: j.child, q: sweep(base[j.child], j.limits) }));
+  // A joint that follows another (`mimic`) moves with its leader, by the coupling, from
+  // its own state on view; it has no sweep of its own.
+  const followers = joints.filter((j) => j.mimic);
+  const paths = joints.filter((j) => !j.mimic).map((j) => ({ child: j.child, q: sweep(base[j.child], j.limits) }));
   const per = mode === 'joints' ? JOINT_S : TOGETHER_S;
   const seconds = mode === 'joints' ? per * paths.length : per;
   const at = (t) => {
@@ -35,6 +50,10 @@ export function jointMotion(joints, base, mode) {
     const u = cycle - Math.floor(cycle);
     const states = base.slice();
     paths.forEach((p, i) => { if (n < 0 || i === n) states[p.child] = p.q(u); });
+    for (const f of followers) {
+      const lead = f.mimic.joint;
+      states[f.child] = base[f.child] + f.mimic.multiplier * (states[lead] - base[lead]);
+    }
     return { states, moving: n < 0 ? -1 : paths[n].child };
   };
   return { seconds, at };
