@@ -976,18 +976,18 @@ pub fn build_articulated(
             POLISH_KEEP,
         );
     }
-    let mimic = if opts.mimic {
-        let unlinked: Vec<usize> = opts
-            .unlinked
-            .iter()
-            .filter_map(|&p| merged.map.get(p).map(|&m| m as usize))
-            .collect();
-        let joints = result.joints.get_or_insert_with(Vec::new);
-        let found = find_couplings(joints, object_size(&points[canonical]), &unlinked);
-        apply_couplings(joints, &found);
-        found
-    } else {
-        Vec::new()
+    let mimic = match result.joints.as_mut() {
+        Some(joints) if opts.mimic => {
+            let unlinked: Vec<usize> = opts
+                .unlinked
+                .iter()
+                .filter_map(|&p| merged.map.get(p).map(|&m| m as usize))
+                .collect();
+            let found = find_couplings(joints, object_size(&points[canonical]), &unlinked);
+            apply_couplings(joints, &found);
+            found
+        }
+        _ => Vec::new(),
     };
     timings.push(("tree".to_string(), tree_s));
     timings.push(("projection".to_string(), proj_s));

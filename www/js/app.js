@@ -1022,7 +1022,6 @@ function renderResult(extra = {}) {
       // An offset that rounds to nothing is left out.
       const offPart = /[1-9]/.test(offText) ? ` ${off < 0 ? '−' : '+'} ${offText}` : '';
       detail.textContent += ` · follows joint ${leader + 1}: ${mul.toFixed(3)} × its state${offPart}`;
-      row.classList.add('follower');
     }
     const slider = document.createElement('input');
     slider.type = 'range';
@@ -1042,7 +1041,9 @@ function renderResult(extra = {}) {
       stopPlay();
       S.states[j.child] = Number(slider.value);
       val.textContent = fmtState(S.states[j.child]);
-      if (joints.some((x) => x.mimic?.joint === j.child)) { follow(joints, S.states); syncSliders(); }
+      // Its followers move with it (the others keep their states on view).
+      const followers = joints.filter((x) => x.mimic?.joint === j.child);
+      if (followers.length) { follow(followers, S.states); syncSliders(); }
       drawModel();
     });
     slider.addEventListener('focus', () => highlightPart(j.child));
