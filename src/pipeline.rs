@@ -701,8 +701,14 @@ pub fn finish(
     // mean RI 0.874 → 0.886, reconstruction 1.015 → 0.973, flow 1.013 → 0.978;
     // balanced 0.888 → 0.898, 0.85 → 0.82, 0.85 → 0.84. Not on occluded input, where
     // a point's part is hidden in many frames: RI 0.745 → 0.741, the rest unchanged.
-    let (relabelled, unexplained, relabel_s) =
-        relabel_full(seq, &mut result, norm.scale, step1.occlusion_used, clock);
+    let (relabelled, unexplained, relabel_s) = relabel_full(
+        seq,
+        &mut result,
+        norm.scale,
+        step1.occlusion_used,
+        true,
+        clock,
+    );
     result.points = Some(
         seq.frames[canonical]
             .points
@@ -960,12 +966,14 @@ fn invisible_joints(kin: &crate::kinematics::KinReport) -> usize {
 /// point onto the other frames (`kinematics::relabel`), and the share of points the
 /// model leaves unexplained with the seconds it took (`kinematics::coverage`, for
 /// [`second_look`]). Returns (points relabelled, unexplained, relabelling seconds).
-/// `scale`: the fit's normalisation scale. Nothing on occluded input.
+/// `scale`: the fit's normalisation scale. Nothing on occluded input; with `relabel`
+/// false, only the share unexplained.
 pub(crate) fn relabel_full(
     seq: &crate::io::sequence::Sequence,
     result: &mut crate::io::result::FitResult,
     scale: f64,
     occluded: bool,
+    relabel: bool,
     clock: &dyn Fn() -> f64,
 ) -> (usize, Option<(f64, f64)>, f64) {
     let k = seq.frames.len();
@@ -987,14 +995,18 @@ pub(crate) fn relabel_full(
                     .collect()
             })
             .collect();
-        let changed = crate::kinematics::relabel::relabel(
-            &clouds,
-            &grids,
-            &mut result.labels,
-            &poses,
-            scale,
-            &Default::default(),
-        );
+        let changed = if relabel {
+            crate::kinematics::relabel::relabel(
+                &clouds,
+                &grids,
+                &mut result.labels,
+                &poses,
+                scale,
+                &Default::default(),
+            )
+        } else {
+            0
+        };
         // What the finished model leaves unexplained, for `second_look`.
         let t = clock();
         let labels = result
