@@ -17,6 +17,7 @@
 //! `gsart truth`).
 
 use glam::DMat4;
+use serde_json::json;
 
 use crate::io::gt::JointType;
 use crate::io::result::FitResult;
@@ -137,7 +138,7 @@ pub fn apply(
         }
     }
     if edit.only_unlinks() {
-        return unlink_only(old, &edit.unlink);
+        return unlink_only(old, edit);
     }
     let (map, parts) = join_map(old.parts, groups)?;
     let root = match edit.root {
@@ -276,18 +277,7 @@ pub fn apply(
         Some(serde_json::Value::Object(o)) => o,
         _ => serde_json::Map::new(),
     };
-    record_edit(
-        &mut info,
-        serde_json::json!({
-            "join": groups,
-            "joint_types": edit.joint_types,
-            "root": edit.root,
-            "unlink": edit.unlink,
-            "parts_before": old.parts,
-            "parts_after": result.parts,
-            "occlusion_used": occluded,
-        }),
-    );
+    record_edit(&mut info, edit, old.parts, result.parts, json!(occluded));
     // Steps 2–3's keys are the new ones, as a fit writes them.
     info.extend(crate::pipeline::kin_info(
         &kin,
@@ -314,9 +304,11 @@ pub fn apply(
 /// nothing else changed: a coupling does not enter the geometry (`kinematics::mimic`),
 /// so Steps 2–3 are not done again (they would not give back exactly the same model).
 /// The report of the returned output is empty.
-fn unlink_only(old: &FitResult, unlink: &[usize]) -> crate::Result<FitOutput> {
-    let (map, _) = join_map(old.parts, &[])?;
-    let mut unlinked = unlinked(old, &map, unlink)?;
+fn unlink_only(old: &FitResult, edit: &Edit) -> crate::Result<FitOutput> {
+    let unlink = &edit.unlink[..];
+    // No part is joined: every part keeps its number.
+    let same: Vec<u32> = (0..old.parts as u32).collect();
+    let mut unlinked = unlinked(old, &same, unlink)?;
     unlinked.sort_unstable();
     unlinked.dedup();
     let mut result = old.clone();
@@ -358,18 +350,7 @@ fn unlink_only(old: &FitResult, unlink: &[usize]) -> crate::Result<FitOutput> {
         .get("occlusion_used")
         .cloned()
         .unwrap_or(serde_json::Value::Null);
-    record_edit(
-        &mut info,
-        serde_json::json!({
-            "join": [],
-            "joint_types": [],
-            "root": null,
-            "unlink": unlink,
-            "parts_before": old.parts,
-            "parts_after": old.parts,
-            "occlusion_used": occluded,
-        }),
-    );
+    record_edit(&mut info, edit, old.parts, old.parts, occluded);
     info.insert("unlinked".into(), serde_json::json!(unlinked));
     info.insert("notes".into(), serde_json::json!(notes));
     info.insert("kinematics_notes".into(), serde_json::json!(kin_notes));
@@ -382,14 +363,29 @@ fn unlink_only(old: &FitResult, unlink: &[usize]) -> crate::Result<FitOutput> {
     })
 }
 
-/// Appends `entry` to `info.edits` (one entry per edit by hand).
-fn record_edit(info: &mut serde_json::Map<String, serde_json::Value>, entry: serde_json::Value) {
+/// Appends `edit` to `info.edits` (one entry per edit by hand, in the part numbers of
+/// the result it applied to), with the part counts before and after it.
+fn record_edit(
+    info: &mut serde_json::Map<String, serde_json::Value>,
+    edit: &Edit,
+    parts_before: usize,
+    parts_after: usize,
+    occlusion_used: serde_json::Value,
+) {
     let mut edits = info
         .get("edits")
         .and_then(|e| e.as_array())
         .cloned()
         .unwrap_or_default();
-    edits.push(entry);
+    edits.push(json!({
+        "join": edit.join,
+        "joint_types": edit.joint_types,
+        "root": edit.root,
+        "unlink": edit.unlink,
+        "parts_before": parts_before,
+        "parts_after": parts_after,
+        "occlusion_used": occlusion_used,
+    }));
     info.insert("edits".into(), serde_json::json!(edits));
 }
 

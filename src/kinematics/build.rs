@@ -952,18 +952,17 @@ pub fn build_articulated(
         })
         .collect();
     let canon_labels = result.labels[canonical].clone();
+    // The object's size, for the pose tolerance and the couplings' least slide.
+    let size = object_size(&points[canonical]);
     let poses_replaced = match opts.pose_tolerance {
-        Some(tol) => {
-            let size = object_size(&points[canonical]);
-            keep_faithful_poses(
-                &mut result,
-                &observed,
-                &points[canonical],
-                &canon_labels,
-                points,
-                (tol * size).max(AGREE_SPACINGS * dist.spacing),
-            )
-        }
+        Some(tol) => keep_faithful_poses(
+            &mut result,
+            &observed,
+            &points[canonical],
+            &canon_labels,
+            points,
+            (tol * size).max(AGREE_SPACINGS * dist.spacing),
+        ),
         None => 0,
     };
     if opts.polish {
@@ -983,7 +982,7 @@ pub fn build_articulated(
                 .iter()
                 .filter_map(|&p| merged.map.get(p).map(|&m| m as usize))
                 .collect();
-            let found = find_couplings(joints, object_size(&points[canonical]), &unlinked);
+            let found = find_couplings(joints, size, &unlinked);
             apply_couplings(joints, &found);
             found
         }

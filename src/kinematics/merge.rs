@@ -247,7 +247,6 @@ pub fn merge_parts(
     }
 }
 
-/// The member with the most points (ties: the first listed), whose pose a group takes.
 /// The member of a group with the most points (`counts[p]`), the first among equals:
 /// the part whose pose a merged group takes.
 pub(crate) fn largest_member(members: &[usize], counts: &[usize]) -> usize {

@@ -71,12 +71,9 @@ fn line(x: &[f64], y: &[f64]) -> Option<(f64, f64, f64)> {
     Some((a, b, (ss / n).sqrt()))
 }
 
+/// The span of a joint's states.
 fn range(q: &[f64]) -> f64 {
-    let (lo, hi) = q
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
-            (l.min(v), h.max(v))
-        });
+    let (lo, hi) = super::screw::state_range(q);
     hi - lo
 }
 
