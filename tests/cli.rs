@@ -587,3 +587,43 @@ fn a_poorly_explained_balanced_fit_is_done_again_from_another_seed() {
     assert!(laptop["info"]["unexplained"].as_f64().unwrap() <= gsart::pipeline::RETRY_UNEXPLAINED);
     assert!(laptop["info"].get("retry").is_none());
 }
+
+/// `gsart synth --noise/--outliers` writes perturbed frames and says so in gt.json;
+/// out-of-range values are refused with the reason.
+#[test]
+fn synth_adds_sensor_noise_and_flying_pixels() {
+    let dir = tmp("synth_noise");
+    let seq = dir.join("laptop");
+    let args = |noise: &str, outliers: &str| {
+        gsart(&[
+            "synth",
+            "laptop",
+            "--out",
+            seq.to_str().unwrap(),
+            "--frames",
+            "2",
+            "--points",
+            "256",
+            "--noise",
+            noise,
+            "--outliers",
+            outliers,
+        ])
+    };
+    let (ok, _, err) = args("0.003", "0.01");
+    assert!(ok, "{err}");
+    let gt: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(seq.join("gt.json")).unwrap()).unwrap();
+    assert_eq!(gt["sensor_noise"]["sigma"], 0.003);
+    assert_eq!(gt["sensor_noise"]["outlier_fraction"], 0.01);
+    let (ok, _, err) = args("0.5", "0");
+    assert!(
+        !ok && err.contains("noise must be between 0 and 0.1"),
+        "{err}"
+    );
+    let (ok, _, err) = args("0", "0.9");
+    assert!(
+        !ok && err.contains("outliers must be between 0 and 0.5"),
+        "{err}"
+    );
+}

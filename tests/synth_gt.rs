@@ -506,3 +506,72 @@ fn options_are_validated_and_names_parse() {
     assert_eq!(small.sequence.frames.len(), 2);
     assert!(small.heldout.is_empty() && small.gt.heldout_poses.is_empty());
 }
+
+#[test]
+fn sensor_noise_and_flying_pixels_perturb_the_frames_only() {
+    let clean = gen(&opts(ObjectKind::Laptop, 3));
+    let (sigma, share) = (0.004, 0.02);
+    let noisy = gen(&SynthOptions {
+        noise: sigma,
+        outliers: share,
+        ..opts(ObjectKind::Laptop, 3)
+    });
+    // The same object, poses, labels and held-out clouds: only the frame points move.
+    assert_same_gt(&clean.gt, &noisy.gt);
+    for (a, b) in clean.heldout.iter().zip(&noisy.heldout) {
+        assert_eq!(a.points, b.points);
+    }
+    let (mut offsets, mut thrown, mut n) = (Vec::new(), 0usize, 0usize);
+    for (a, b) in clean.sequence.frames.iter().zip(&noisy.sequence.frames) {
+        assert_eq!(a.labels, b.labels);
+        assert_eq!(a.points.len(), b.points.len());
+        for (p, q) in a.points.iter().zip(&b.points) {
+            let d = (*q - *p).as_dvec3();
+            n += 1;
+            if d.length() > 0.04 {
+                // A flying pixel: 5–15 % of the size off, plus the noise.
+                assert!(d.length() < 0.15 + 6.0 * sigma, "{d}");
+                thrown += 1;
+            } else {
+                offsets.extend([d.x, d.y, d.z]);
+            }
+        }
+    }
+    let rms = (offsets.iter().map(|x| x * x).sum::<f64>() / offsets.len() as f64).sqrt();
+    assert!(
+        (rms - sigma).abs() < 0.05 * sigma,
+        "noise rms {rms} for σ {sigma}"
+    );
+    let got = thrown as f64 / n as f64;
+    assert!((got - share).abs() < 0.005, "{thrown} of {n} thrown");
+    // Deterministic for a seed, and written down in gt.json.
+    let again = gen(&SynthOptions {
+        noise: sigma,
+        outliers: share,
+        ..opts(ObjectKind::Laptop, 3)
+    });
+    assert_eq!(
+        noisy.sequence.frames[4].points,
+        again.sequence.frames[4].points
+    );
+    let gt: serde_json::Value = serde_json::from_str(&gt_json(&noisy)).unwrap();
+    assert_eq!(gt["sensor_noise"]["sigma"], sigma);
+    assert_eq!(gt["sensor_noise"]["outlier_fraction"], share);
+    let gt_clean: serde_json::Value = serde_json::from_str(&gt_json(&clean)).unwrap();
+    assert!(gt_clean.get("sensor_noise").is_none());
+    // Out-of-range settings are refused.
+    for (noise, outliers) in [
+        (-0.1, 0.0),
+        (0.2, 0.0),
+        (f64::NAN, 0.0),
+        (0.0, 0.6),
+        (0.0, -1.0),
+    ] {
+        let e = generate(&SynthOptions {
+            noise,
+            outliers,
+            ..SynthOptions::default()
+        });
+        assert!(e.is_err(), "noise {noise}, outliers {outliers} accepted");
+    }
+}

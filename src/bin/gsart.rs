@@ -125,6 +125,14 @@ mod cli {
             /// Keep only the points visible from a random camera per frame.
             #[arg(long)]
             occluded: bool,
+            /// Sensor noise: σ of a normal offset per axis, as a fraction of the
+            /// object's longest side (a depth camera: about 0.002).
+            #[arg(long, default_value_t = 0.0)]
+            noise: f64,
+            /// Share of each frame's points thrown 5–15 % of the object's size off the
+            /// surface (flying pixels).
+            #[arg(long, default_value_t = 0.0)]
+            outliers: f64,
             #[arg(long, default_value_t = 0)]
             seed: u64,
         },
@@ -260,8 +268,18 @@ mod cli {
                 points,
                 heldout,
                 occluded,
+                noise,
+                outliers,
                 seed,
-            } => synth(&kind, &out, frames, points, heldout, occluded, seed),
+            } => synth(
+                &kind,
+                &out,
+                frames,
+                points,
+                heldout,
+                (occluded, noise, outliers),
+                seed,
+            ),
             Command::Articulate {
                 result,
                 states,
@@ -983,7 +1001,7 @@ mod cli {
         frames: usize,
         points: Option<usize>,
         heldout: usize,
-        occluded: bool,
+        (occluded, noise, outliers): (bool, f64, f64),
         seed: u64,
     ) -> Result<()> {
         use gsart::synth::{example_names, generate, write_sequence_dir, ObjectKind, SynthOptions};
@@ -1003,6 +1021,8 @@ mod cli {
             }
             o.heldout = heldout;
             o.occluded = occluded;
+            o.noise = noise;
+            o.outliers = outliers;
             o.seed = seed;
             let generated = generate(&o)?;
             let dir = if kind == "all" {

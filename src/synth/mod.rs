@@ -134,6 +134,14 @@ pub struct SynthOptions {
     pub heldout: usize,
     /// Keep only the points visible from a random camera in each frame.
     pub occluded: bool,
+    /// Sensor noise: every frame point moves by a normal offset of this standard
+    /// deviation per axis, as a fraction of the object's longest side (0 ≤ σ ≤
+    /// [`MAX_NOISE`]; a depth camera a metre from a robot of a metre: about 0.002).
+    pub noise: f64,
+    /// Flying pixels: this fraction of each frame's points (0 ≤ f ≤ [`MAX_OUTLIERS`])
+    /// thrown 5–15 % of the object's longest side off the surface in a random
+    /// direction, keeping their part's label.
+    pub outliers: f64,
     pub seed: u64,
 }
 
@@ -146,6 +154,8 @@ impl SynthOptions {
             points: kind.default_points(),
             heldout: 3,
             occluded: false,
+            noise: 0.0,
+            outliers: 0.0,
             seed: 0,
         }
     }
@@ -178,6 +188,10 @@ pub struct SynthInfo {
     pub cameras: Vec<DVec3>,
     pub visible: Vec<Vec<u32>>,
     pub occlusion_method: Option<occlusion::Method>,
+    /// The sensor noise and share of flying pixels the frames were given
+    /// (`SynthOptions::noise`, `outliers`).
+    pub noise: f64,
+    pub outliers: f64,
 }
 
 /// A generated sequence: observed frames (with part labels), ground truth, and
@@ -193,6 +207,12 @@ pub struct SynthOutput {
 /// Largest accepted point count per frame (keeps a mistyped option from exhausting memory).
 pub const MAX_POINTS: usize = 2_000_000;
 pub const MAX_FRAMES: usize = 1000;
+/// Largest sensor noise (σ as a fraction of the object's longest side).
+pub const MAX_NOISE: f64 = 0.1;
+/// Largest share of flying pixels.
+pub const MAX_OUTLIERS: f64 = 0.5;
+/// How far a flying pixel is thrown off the surface, as fractions of the longest side.
+const OUTLIER_REACH: (f64, f64) = (0.05, 0.15);
 
 /// Independent seeded stream per purpose, so e.g. the occluded variant samples the
 /// same full clouds as the full variant.
@@ -303,6 +323,18 @@ fn check(opts: &SynthOptions) -> crate::Result<()> {
             opts.heldout
         ));
     }
+    if !(0.0..=MAX_NOISE).contains(&opts.noise) {
+        return bad(format!(
+            "noise must be between 0 and {MAX_NOISE} (a fraction of the object's size), got {}",
+            opts.noise
+        ));
+    }
+    if !(0.0..=MAX_OUTLIERS).contains(&opts.outliers) {
+        return bad(format!(
+            "the share of outliers must be between 0 and {MAX_OUTLIERS}, got {}",
+            opts.outliers
+        ));
+    }
     Ok(())
 }
 
@@ -324,6 +356,32 @@ fn to_frame(name: String, pts: &[DVec3], labels: Vec<u32>, s: f64, c: DVec3) -> 
             })
             .collect(),
         labels: Some(labels),
+    }
+}
+
+/// A standard normal draw (Box–Muller, with `crate::math`'s functions so that the draws
+/// are the same natively and in wasm).
+fn normal(rng: &mut StdRng) -> f64 {
+    let u = 1.0 - rng.random::<f64>(); // (0, 1]: ln stays finite
+    let v = rng.random::<f64>();
+    (-2.0 * u.lln()).sqrt() * (std::f64::consts::TAU * v).lcos()
+}
+
+/// Moves every point by a normal offset of standard deviation `sigma` per axis, and
+/// throws each point, with probability `outliers`, `OUTLIER_REACH` off in a random
+/// direction (normalised units: the object's longest side is 1).
+fn perturb(points: &mut [Vec3], sigma: f64, outliers: f64, rng: &mut StdRng) {
+    for p in points {
+        let mut q = p.as_dvec3();
+        if sigma > 0.0 {
+            q += DVec3::new(normal(rng), normal(rng), normal(rng)) * sigma;
+        }
+        if outliers > 0.0 && rng.random::<f64>() < outliers {
+            let dir = DVec3::new(normal(rng), normal(rng), normal(rng)).normalize_or(DVec3::X);
+            let (lo, hi) = OUTLIER_REACH;
+            q += dir * (lo + (hi - lo) * rng.random::<f64>());
+        }
+        *p = q.as_vec3();
     }
 }
 
@@ -475,6 +533,15 @@ pub fn generate(opts: &SynthOptions) -> crate::Result<SynthOutput> {
         }
     }
 
+    // Sensor noise and flying pixels on what the camera sees (the held-out clouds, the
+    // re-animation error's truth, stay exact).
+    if opts.noise > 0.0 || opts.outliers > 0.0 {
+        let mut noise_rng = stream(opts.seed, 5);
+        for frame in &mut frames {
+            perturb(&mut frame.points, opts.noise, opts.outliers, &mut noise_rng);
+        }
+    }
+
     let gt = GroundTruth {
         sequence: format!("{}_{:02}", opts.kind, opts.seed),
         num_parts: np,
@@ -504,6 +571,8 @@ pub fn generate(opts: &SynthOptions) -> crate::Result<SynthOutput> {
             cameras,
             visible,
             occlusion_method: method,
+            noise: opts.noise,
+            outliers: opts.outliers,
         },
     })
 }
@@ -632,6 +701,14 @@ pub fn gt_json(out: &SynthOutput) -> String {
                    "camera_positions": info.cameras.iter().map(|c| v3(*c)).collect::<Vec<_>>(),
                    "look_at": [0.0, 0.0, 0.0],
                    "invisible_parts": invisible}),
+        );
+    }
+    if info.noise > 0.0 || info.outliers > 0.0 {
+        map.insert(
+            "sensor_noise".into(),
+            json!({"sigma": info.noise, "outlier_fraction": info.outliers,
+                   "outlier_reach": [OUTLIER_REACH.0, OUTLIER_REACH.1],
+                   "note": "input frames only (held-out clouds are exact): every point moved by N(0, sigma²) per axis, and each point with probability outlier_fraction thrown outlier_reach off in a random direction, keeping its part; normalised units"}),
         );
     }
     serde_json::to_string_pretty(&Value::Object(map)).unwrap_or(base)
