@@ -165,10 +165,20 @@ pub fn apply(
     // Steps 2–3 run in fit units on working clouds of the fit's size (the same
     // normalisation as a fit of this sequence; the sample is seed 0's).
     let norm = Normalisation::of(seq);
-    let working_size = info
-        .and_then(|i| i.get("working_sizes"))
-        .and_then(|w| w.as_array())
-        .and_then(|w| w.iter().filter_map(|x| x.as_u64()).max())
+    // The fit's working size: its largest working cloud, with the flying pixels it
+    // left out of that frame (`info.isolated`) counted back in.
+    let per_frame = |key: &str| -> Vec<u64> {
+        info.and_then(|i| i.get(key))
+            .and_then(|w| w.as_array())
+            .map(|w| w.iter().map(|x| x.as_u64().unwrap_or(0)).collect())
+            .unwrap_or_default()
+    };
+    let isolated = per_frame("isolated");
+    let working_size = per_frame("working_sizes")
+        .iter()
+        .enumerate()
+        .map(|(t, &w)| w + isolated.get(t).copied().unwrap_or(0))
+        .max()
         .map_or(crate::pipeline::FitOptions::default().working_size, |w| {
             w as usize
         });

@@ -738,16 +738,31 @@ pub fn finish(
     );
     let mut notes = Vec::new();
     let working_sizes: Vec<usize> = step1.working.iter().map(|w| w.len()).collect();
+    // Flying pixels the working clouds left out (`geom::outliers`), per frame.
+    let left_out: Vec<usize> = seq
+        .frames
+        .iter()
+        .zip(&step1.working)
+        .map(|(f, w)| crate::geom::outliers::left_out(&f.points, w))
+        .collect();
     let reduced = seq
         .frames
         .iter()
-        .zip(&working_sizes)
-        .filter(|(f, &w)| w < f.points.len())
+        .zip(working_sizes.iter().zip(&left_out))
+        .filter(|(f, (&w, &o))| w + o < f.points.len())
         .count();
     if reduced > 0 {
         notes.push(format!(
             "{reduced} of {k} frames were downsampled for the fit (working size {}); every input point is labelled",
             working_sizes.iter().max().copied().unwrap_or(0)
+        ));
+    }
+    let isolated: usize = left_out.iter().sum();
+    if isolated > 0 {
+        notes.push(format!(
+            "{isolated} points ({:.2} % of the frames' points) lie farther than {} point spacings from any other point of their frame (flying pixels): the fit and the share unexplained left them out; they are labelled like the others",
+            100.0 * isolated as f64 / seq.frames.iter().map(|f| f.points.len()).sum::<usize>().max(1) as f64,
+            crate::geom::outliers::ISOLATED_SPACINGS
         ));
     }
     if !norm.is_identity() {
@@ -843,6 +858,7 @@ pub fn finish(
         "normalisation": {"center": norm.center.to_array(), "scale": norm.scale},
         "iterations": step1.iterations,
         "working_sizes": working_sizes,
+        "isolated": left_out,
         "step1_seconds": step1.timings.total_s,
         "candidates_timing": step1.timings.per_candidate,
         "notes": notes,

@@ -54,8 +54,10 @@ pub fn default_part_range(seq: &Sequence) -> (usize, usize) {
     }
 }
 
-/// Working clouds: frames above `working_size` are randomly downsampled (seeded,
-/// input order kept). Returns the clouds and the kept indices per frame.
+/// Working clouds: frames above `working_size` randomly downsampled (seeded, input
+/// order kept), then without their flying pixels (`geom::outliers`, judged on the
+/// downsampled cloud, so the cost stays that of the working size). Returns the clouds
+/// and the kept indices per frame.
 pub fn working_clouds(
     seq: &Sequence,
     working_size: usize,
@@ -75,7 +77,15 @@ pub fn working_clouds(
             idx.truncate(working_size);
             idx.sort_unstable();
         }
-        clouds.push(idx.iter().map(|&i| f.points[i as usize]).collect());
+        let mut cloud: Vec<Vec3> = idx.iter().map(|&i| f.points[i as usize]).collect();
+        let isolated = crate::geom::outliers::isolated(&cloud);
+        if isolated.contains(&true) {
+            let mut flags = isolated.iter();
+            idx.retain(|_| flags.next() == Some(&false));
+            let mut flags = isolated.iter();
+            cloud.retain(|_| flags.next() == Some(&false));
+        }
+        clouds.push(cloud);
         kept.push(idx);
     }
     (clouds, kept)

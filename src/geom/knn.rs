@@ -229,6 +229,40 @@ impl Grid {
         (best.0 != u32::MAX).then_some(best)
     }
 
+    /// Whether at least `n` indexed points lie within squared distance `r2` of `q`
+    /// (a point at `q` itself counts). Scans the cells of the box of that radius and
+    /// stops at the `n`-th point.
+    pub fn at_least_within(&self, q: Vec3, r2: f32, n: usize) -> bool {
+        if n == 0 {
+            return true;
+        }
+        if self.pts.is_empty() {
+            return false;
+        }
+        let r = r2.max(0.0).sqrt();
+        let lo = self.coords(q - Vec3::splat(r));
+        let hi = self.coords(q + Vec3::splat(r));
+        let mut found = 0;
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                let row = self.index([lo[0], y, z]);
+                let (a, b) = (
+                    self.start[row] as usize,
+                    self.start[row + hi[0] - lo[0] + 1] as usize,
+                );
+                for p in &self.pts[a..b] {
+                    if p.distance_squared(q) <= r2 {
+                        found += 1;
+                        if found >= n {
+                            return true;
+                        }
+                    }
+                }
+            }
+        }
+        false
+    }
+
     /// Squared distance from `q` to its nearest indexed point, capped at `cap2`:
     /// the search stops at that radius, so queries far from the cloud (most
     /// candidate poses of a global search) cost a few cell visits instead of a scan.

@@ -8,4 +8,5 @@ pub mod fps;
 pub mod hull;
 pub mod knn;
 pub mod layers;
+pub mod outliers;
 pub mod se3;
