@@ -760,7 +760,7 @@ pub fn finish(
     let isolated: usize = left_out.iter().sum();
     if isolated > 0 {
         notes.push(format!(
-            "{isolated} points ({:.2} % of the frames' points) lie farther than {} point spacings from any other point of their frame (flying pixels): the fit and the share unexplained left them out; they are labelled like the others",
+            "{isolated} points ({:.2} % of the frames' points) lie farther than {} point spacings from any other point of their frame (flying pixels): the fit left them out, and they are labelled like the others",
             100.0 * isolated as f64 / seq.frames.iter().map(|f| f.points.len()).sum::<usize>().max(1) as f64,
             crate::geom::outliers::ISOLATED_SPACINGS
         ));
