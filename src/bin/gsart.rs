@@ -271,15 +271,19 @@ mod cli {
                 noise,
                 outliers,
                 seed,
-            } => synth(
-                &kind,
-                &out,
-                frames,
-                points,
-                heldout,
-                (occluded, noise, outliers),
-                seed,
-            ),
+            } => {
+                // The settings every object gets; `points` defaults per object.
+                let base = gsart::synth::SynthOptions {
+                    frames,
+                    heldout,
+                    occluded,
+                    noise,
+                    outliers,
+                    seed,
+                    ..Default::default()
+                };
+                synth(&kind, &out, points, &base)
+            }
             Command::Articulate {
                 result,
                 states,
@@ -998,11 +1002,8 @@ mod cli {
     fn synth(
         kind: &str,
         out: &Path,
-        frames: usize,
         points: Option<usize>,
-        heldout: usize,
-        (occluded, noise, outliers): (bool, f64, f64),
-        seed: u64,
+        base: &gsart::synth::SynthOptions,
     ) -> Result<()> {
         use gsart::synth::{example_names, generate, write_sequence_dir, ObjectKind, SynthOptions};
         let kinds: Vec<ObjectKind> = if kind == "all" {
@@ -1014,16 +1015,11 @@ mod cli {
             vec![kind.parse()?]
         };
         for k in kinds {
-            let mut o = SynthOptions::new(k);
-            o.frames = frames;
-            if let Some(p) = points {
-                o.points = p;
-            }
-            o.heldout = heldout;
-            o.occluded = occluded;
-            o.noise = noise;
-            o.outliers = outliers;
-            o.seed = seed;
+            let o = SynthOptions {
+                kind: k,
+                points: points.unwrap_or(k.default_points()),
+                ..base.clone()
+            };
             let generated = generate(&o)?;
             let dir = if kind == "all" {
                 out.join(k.name())
