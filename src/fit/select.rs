@@ -77,14 +77,15 @@ pub fn working_clouds(
             idx.truncate(working_size);
             idx.sort_unstable();
         }
-        let mut cloud: Vec<Vec3> = idx.iter().map(|&i| f.points[i as usize]).collect();
+        let cloud: Vec<Vec3> = idx.iter().map(|&i| f.points[i as usize]).collect();
         let isolated = crate::geom::outliers::isolated(&cloud);
-        if isolated.contains(&true) {
-            let mut flags = isolated.iter();
-            idx.retain(|_| flags.next() == Some(&false));
-            let mut flags = isolated.iter();
-            cloud.retain(|_| flags.next() == Some(&false));
-        }
+        let (idx, cloud): (Vec<u32>, Vec<Vec3>) = idx
+            .into_iter()
+            .zip(cloud)
+            .zip(&isolated)
+            .filter(|(_, &i)| !i)
+            .map(|(pair, _)| pair)
+            .unzip();
         clouds.push(cloud);
         kept.push(idx);
     }

@@ -24,15 +24,15 @@ pub const ISOLATED_SPACINGS: f64 = 5.0;
 /// isolated points is too sparse for the spacing to mean much, and is left whole.
 pub const MAX_ISOLATED_SHARE: f64 = 0.1;
 
-/// Which points of `points` (one frame, indexed by `grid`) are isolated (module doc).
-/// All `false` when the frame is too small to tell or more than
-/// [`MAX_ISOLATED_SHARE`] of it would be.
-pub fn isolated_in(points: &[glam::Vec3], grid: &Grid) -> Vec<bool> {
+/// Which points of `points` (one frame, indexed by `grid`, its point spacing
+/// `spacing`: `knn::point_spacing`) are isolated (module doc). All `false` when the
+/// frame is too small to tell or more than [`MAX_ISOLATED_SHARE`] of it would be.
+pub fn isolated_in(points: &[glam::Vec3], grid: &Grid, spacing: f64) -> Vec<bool> {
     let mut out = vec![false; points.len()];
     if points.len() < 16 {
         return out;
     }
-    let reach = (ISOLATED_SPACINGS * point_spacing(points)) as f32;
+    let reach = (ISOLATED_SPACINGS * spacing) as f32;
     if reach.is_nan() || reach <= 0.0 {
         return out;
     }
@@ -49,9 +49,9 @@ pub fn isolated_in(points: &[glam::Vec3], grid: &Grid) -> Vec<bool> {
     out
 }
 
-/// [`isolated_in`] with the frame's own index.
+/// [`isolated_in`] with the frame's own index and spacing.
 pub fn isolated(points: &[glam::Vec3]) -> Vec<bool> {
-    isolated_in(points, &Grid::new(points))
+    isolated_in(points, &Grid::new(points), point_spacing(points))
 }
 
 /// How many of a frame's `points` lie farther than [`ISOLATED_SPACINGS`] spacings of

@@ -34,21 +34,22 @@ pub fn unexplained(
     let Some(&points) = clouds.get(canonical).filter(|p| !p.is_empty()) else {
         return 0.0;
     };
-    let reach = FAR_SPACINGS * point_spacing(points);
+    let spacing = point_spacing(points);
+    let reach = FAR_SPACINGS * spacing;
     let cap2 = (reach * reach) as f32;
-    // Flying pixels (`geom::outliers`) are no part's, so no model explains them: they
-    // are left out on both sides, as the fit leaves them out of its working clouds.
-    let far = |grid: &Grid, queries: &[Vec3], isolated: &[bool]| {
+    let far = |grid: &Grid, queries: &mut dyn Iterator<Item = Vec3>| {
         let (mut n, mut asked) = (0usize, 0usize);
-        for (q, _) in queries.iter().zip(isolated).filter(|(_, &i)| !i) {
+        for q in queries {
             asked += 1;
-            n += usize::from(grid.nearest_capped(*q, cap2).is_none());
+            n += usize::from(grid.nearest_capped(q, cap2).is_none());
         }
         n as f64 / asked.max(1) as f64
     };
+    // Flying pixels (`geom::outliers`) are no part's, so no model explains them: they
+    // are left out on both sides, as the fit leaves them out of its working clouds.
     let own_isolated = grids
         .get(canonical)
-        .map(|g| isolated_in(points, g))
+        .map(|g| isolated_in(points, g, spacing))
         .unwrap_or_else(|| vec![false; points.len()]);
     let kept: Vec<(Vec3, u32)> = points
         .iter()
@@ -57,7 +58,6 @@ pub fn unexplained(
         .filter(|(_, &i)| !i)
         .map(|((p, &l), _)| (*p, l))
         .collect();
-    let none_isolated = vec![false; kept.len()];
     let mut carried = Vec::with_capacity(kept.len());
     let mut grid = Grid::new(&[]);
     let (mut sum, mut frames) = (0.0, 0usize);
@@ -75,8 +75,13 @@ pub fn unexplained(
             pose.transform_point3(p.as_dvec3()).as_vec3()
         }));
         grid.rebuild(&carried);
-        let isolated = isolated_in(cloud, there);
-        sum += 0.5 * (far(there, &carried, &none_isolated) + far(&grid, cloud, &isolated));
+        let isolated = isolated_in(cloud, there, point_spacing(cloud));
+        let mut seen = cloud
+            .iter()
+            .zip(&isolated)
+            .filter(|(_, &i)| !i)
+            .map(|(q, _)| *q);
+        sum += 0.5 * (far(there, &mut carried.iter().copied()) + far(&grid, &mut seen));
         frames += 1;
     }
     sum / frames.max(1) as f64
