@@ -706,6 +706,24 @@ impl TieCheck<'_> {
     }
 }
 
+/// What the build loop of [`build_articulated`] ends with: the merged parts' tree,
+/// the projected, refined and repaired model, and what the repairs did. Named fields,
+/// since several are counts or indices of the same type.
+struct Built {
+    parts: usize,
+    dist: super::spatial::PairDistances,
+    costs: super::tree::PairCosts,
+    root: usize,
+    parent: Vec<i64>,
+    result: FitResult,
+    residuals: Vec<JointResidual>,
+    refine_report: Option<RefineReport>,
+    observed: Vec<Vec<DMat4>>,
+    spin_free: Vec<SpinFree>,
+    tied: Tied,
+    half_turns: Vec<usize>,
+}
+
 /// Steps 2 and 3 from Step 1's output: working points `points[k]`, their part labels
 /// `labels[k]` and the part poses `poses[k][p]` (only relative motions matter).
 /// Returns the articulated model (labels relabelled to merged parts, one per input
@@ -747,7 +765,7 @@ pub fn build_articulated(
     // and the tree is built again.
     let (mut tree_s, mut proj_s, mut refine_s) = (0.0, 0.0, 0.0);
     let (mut flipped, mut swept) = (0, 0);
-    let (
+    let Built {
         parts,
         dist,
         costs,
@@ -760,7 +778,7 @@ pub fn build_articulated(
         spin_free,
         tied,
         half_turns,
-    ) = loop {
+    } = loop {
         // The tree and the joints are built from each part's observed motion, polished
         // against the clouds (`polished_input`), not from its largest Gaussian's pose.
         // Parts too small for either keep the largest Gaussian's pose, so the observed
@@ -957,7 +975,7 @@ pub fn build_articulated(
             merged = absorb(&merged, &still, poses, &counts, "still");
             continue;
         }
-        break (
+        break Built {
             parts,
             dist,
             costs,
@@ -970,7 +988,7 @@ pub fn build_articulated(
             spin_free,
             tied,
             half_turns,
-        );
+        };
     };
     let parallel = tied
         .groups
