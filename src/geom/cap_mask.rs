@@ -22,9 +22,27 @@ const MAX_CELLS: usize = 1 << 25;
 #[derive(Debug, Clone, Default)]
 pub struct CapMask {
     min: Vec3,
+    cell: f32,
     inv_cell: f32,
     dims: [usize; 3],
     bits: Vec<u64>,
+    /// Marked cells before each word of `bits`: a marked cell's slot is its rank
+    /// among the marked cells (`Place::Near`), so per-cell data can be kept for the
+    /// marked cells alone.
+    rank: Vec<u32>,
+    /// Number of marked cells.
+    marked: usize,
+}
+
+/// Where a place lies for a mask (`CapMask::place`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Place {
+    /// Certainly farther than the radius from every point.
+    Far,
+    /// In the marked cell with this slot; `Vec3` is the cell's centre.
+    Near(usize, Vec3),
+    /// Not known (an empty mask, a non-finite place).
+    Unknown,
 }
 
 impl CapMask {
@@ -65,9 +83,12 @@ impl CapMask {
         let total = dims[0] * dims[1] * dims[2];
         let mut mask = CapMask {
             min,
+            cell,
             inv_cell: 1.0 / cell,
             dims,
             bits: vec![0; total.div_ceil(64)],
+            rank: Vec::new(),
+            marked: 0,
         };
         let r2 = reach * reach;
         for p in points {
@@ -96,7 +117,32 @@ impl CapMask {
                 }
             }
         }
+        for word in &mask.bits {
+            mask.rank.push(mask.marked as u32);
+            mask.marked += word.count_ones() as usize;
+        }
         mask
+    }
+
+    /// Number of marked cells (slots).
+    pub fn slots(&self) -> usize {
+        self.marked
+    }
+
+    /// The largest absolute coordinate of the mask's box (the scale of its rounding).
+    pub fn scale(&self) -> f32 {
+        let far = self.min
+            + Vec3::new(
+                self.dims[0] as f32,
+                self.dims[1] as f32,
+                self.dims[2] as f32,
+            ) * self.cell;
+        self.min.abs().max(far.abs()).max_element()
+    }
+
+    /// Half the diagonal of a cell: how far a place in a cell can be from its centre.
+    pub fn half_diagonal(&self) -> f32 {
+        0.5 * 3f32.sqrt() * self.cell
     }
 
     /// Sets bits `a..=b`.
@@ -124,23 +170,54 @@ impl CapMask {
     /// unsure, e.g. for a mask of nothing or a non-finite query).
     #[inline]
     pub fn far(&self, q: Vec3) -> bool {
+        matches!(self.locate(q), Located::Far)
+    }
+
+    /// Where `q` lies: beyond the radius, in a marked cell, or not known.
+    #[inline]
+    pub fn place(&self, q: Vec3) -> Place {
+        match self.locate(q) {
+            Located::Far => Place::Far,
+            Located::Unknown => Place::Unknown,
+            Located::Marked([x, y, z], i) => {
+                let (w, b) = (i / 64, i % 64);
+                let below = self.bits[w] & ((1u64 << b) - 1);
+                let slot = self.rank[w] as usize + below.count_ones() as usize;
+                let corner = Vec3::new(x as f32, y as f32, z as f32);
+                Place::Near(slot, self.min + (corner + 0.5) * self.cell)
+            }
+        }
+    }
+
+    #[inline]
+    fn locate(&self, q: Vec3) -> Located {
         if self.bits.is_empty() {
-            return false;
+            return Located::Unknown;
         }
         let f = (q - self.min) * self.inv_cell;
         if !f.is_finite() {
-            return false;
+            return Located::Unknown;
         }
         if f.cmplt(Vec3::ZERO).any() {
-            return true;
+            return Located::Far;
         }
         let (x, y, z) = (f.x as usize, f.y as usize, f.z as usize);
         if x >= self.dims[0] || y >= self.dims[1] || z >= self.dims[2] {
-            return true;
+            return Located::Far;
         }
         let i = (z * self.dims[1] + y) * self.dims[0] + x;
-        self.bits[i / 64] & (1 << (i % 64)) == 0
+        if self.bits[i / 64] & (1 << (i % 64)) == 0 {
+            return Located::Far;
+        }
+        Located::Marked([x, y, z], i)
     }
+}
+
+/// `CapMask::locate`'s answer: a marked cell with its coordinates and index.
+enum Located {
+    Far,
+    Unknown,
+    Marked([usize; 3], usize),
 }
 
 #[cfg(test)]

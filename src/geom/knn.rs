@@ -435,11 +435,12 @@ pub fn point_spacing(points: &[Vec3]) -> f64 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
-    fn brute(points: &[Vec3], q: Vec3) -> f32 {
+    /// Squared distance from `q` to the nearest of `points`, by scanning them all.
+    pub(crate) fn brute(points: &[Vec3], q: Vec3) -> f32 {
         points
             .iter()
             .map(|p| p.distance_squared(q))

@@ -3,6 +3,7 @@
 
 pub mod assignment;
 pub mod camera;
+pub mod cap_bound;
 pub mod cap_mask;
 pub mod fps;
 pub mod hull;
