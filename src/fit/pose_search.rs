@@ -188,7 +188,7 @@ impl<'a> Target<'a> {
             orig: (0..data.frames[t].len() as u32).collect(),
             grid: data.grids[t].clone(),
             far: &cap.masks[t],
-            bound: if data.frames32[t].len() >= BOUND_MIN_POINTS {
+            bound: if cap.masks[t].slots() <= BOUND_CELLS_PER_POINT * data.frames32[t].len() {
                 CapBound::new(&cap.masks[t], (cap.cap2 as f32).sqrt())
             } else {
                 CapBound::default()
@@ -252,12 +252,15 @@ impl<'a> Target<'a> {
     }
 }
 
-/// Frames of fewer points score their candidates without the lower bounds
-/// (`coarse_top`): their cap follows the point spacing, so its cells cover much of the
-/// box (the procedural laptop, 2048 points a frame: 168 000 marked cells, against
-/// 38 000 for bench-dev so101's 4096), and the bounds' memory (peak 16 → 33 MB) buys
-/// no time (10.0–11.2 s CPU without them, 10.9–11.4 s with them, two runs each).
-const BOUND_MIN_POINTS: usize = 3000;
+/// A frame's candidates are scored with the lower bounds (`coarse_top`) only when its
+/// cap mask has at most this many marked cells per point: every cell a probe lands in
+/// costs a grid query to measure, so where the cap's cells cover much of the surface
+/// the bounds cost what they save, and their memory. Marked cells per point of the
+/// first frame, and CPU time with the bounds against without (one fit each, balanced,
+/// seed 0, the same minute): bench-dev so101 9.3 (−13 %), laikago 19 (−8 %),
+/// panda_gripper 47 (+5 %, peak 21 → 40 MB); the procedural quadruped 32 (+2 %), hand
+/// 40 (−3 %), laptop 82 (+5 %, 16 → 33 MB).
+const BOUND_CELLS_PER_POINT: usize = 25;
 
 /// Squared distance from `x` to the nearest point of `grid`, capped at `cap2`; `far`
 /// (a mask of the same cloud or a superset, built for that cap) answers places
