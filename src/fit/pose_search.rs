@@ -259,7 +259,7 @@ impl<'a> Target<'a> {
 /// first frame, and CPU time with the bounds against without (one fit each, balanced,
 /// seed 0, the same minute): bench-dev so101 9.3 (−13 %), laikago 19 (−8 %),
 /// panda_gripper 47 (+5 %, peak 21 → 40 MB); the procedural quadruped 32 (+2 %), hand
-/// 40 (−3 %), laptop 82 (+5 %, 16 → 33 MB).
+/// 40 (−3 %), laptop 82 (about +5 %, 16 → 33 MB).
 const BOUND_CELLS_PER_POINT: usize = 25;
 
 /// Squared distance from `x` to the nearest point of `grid`, capped at `cap2`; `far`
