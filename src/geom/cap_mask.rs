@@ -7,6 +7,9 @@
 //! where the grid query still scans the (empty) cells of its cap's box. The mask is exact:
 //! a cell is left unmarked only when no point lies within the radius of any place in it,
 //! so removing points from the cloud later (the search's `claim`) keeps it valid.
+//!
+//! Each marked cell also has a slot, its rank among the marked cells (`Place::Near`), so
+//! data per marked cell (`cap_bound`'s distances) needs no array over the whole box.
 
 use glam::Vec3;
 
