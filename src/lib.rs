@@ -13,6 +13,7 @@ pub mod eval;
 pub mod fit;
 pub mod geom;
 pub mod io;
+pub mod key_frames;
 pub mod kinematics;
 pub mod math;
 pub mod normalisation;

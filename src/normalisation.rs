@@ -217,28 +217,53 @@ impl Normalisation {
         }
     }
 
+    /// A result's poses, root motion and joints from input to fit units (the inverse of
+    /// [`Self::result_to_input`]; the Gaussians and points are left as they are).
+    pub fn result_to_fit(&self, r: &mut crate::io::result::FitResult) {
+        self.result_map(
+            r,
+            Self::motion_to_fit,
+            |p| (p - self.center) / self.scale,
+            |d| d / self.scale,
+        );
+    }
+
     /// A result's poses, root motion and joints from fit to input units (labels,
     /// axes and revolute states need no change; the Gaussians and points are written
     /// from input-unit data by the pipeline).
     pub fn result_to_input(&self, r: &mut crate::io::result::FitResult) {
+        self.result_map(
+            r,
+            Self::motion_to_input,
+            |p| self.point_to_input(p),
+            |d| self.length_to_input(d),
+        );
+    }
+
+    /// Maps a result's poses and root motion by `motion`, its pivots by `point` and its
+    /// prismatic states and limits by `length`.
+    fn result_map(
+        &self,
+        r: &mut crate::io::result::FitResult,
+        motion: fn(&Self, &DMat4) -> DMat4,
+        point: impl Fn(DVec3) -> DVec3,
+        length: impl Fn(f64) -> f64,
+    ) {
         use crate::geom::se3::{from_row_major, to_row_major};
         use crate::io::gt::JointType;
         if self.is_identity() {
             return;
         }
-        let motion =
-            |m: &mut [f64; 16]| *m = to_row_major(&self.motion_to_input(&from_row_major(m)));
+        let motion = |m: &mut [f64; 16]| *m = to_row_major(&motion(self, &from_row_major(m)));
         r.poses.iter_mut().flatten().for_each(motion);
         if let Some(root) = &mut r.root_motion {
             root.iter_mut().for_each(motion);
         }
         for j in r.joints.iter_mut().flatten() {
-            j.pivot = self.point_to_input(DVec3::from_array(j.pivot)).to_array();
+            j.pivot = point(DVec3::from_array(j.pivot)).to_array();
             if j.joint_type == JointType::Prismatic {
-                j.state
-                    .iter_mut()
-                    .for_each(|q| *q = self.length_to_input(*q));
-                j.limits = j.limits.map(|q| self.length_to_input(q));
+                j.state.iter_mut().for_each(|q| *q = length(*q));
+                j.limits = j.limits.map(&length);
             }
         }
     }
@@ -349,5 +374,65 @@ mod tests {
         let a = n.point_to_input(place_fit.transform_point3(local));
         let b = place_in.transform_point3(local * n.scale);
         assert!((a - b).length() < 1e-9);
+    }
+
+    /// `result_to_fit` undoes `result_to_input`: poses, root motion, pivots and the
+    /// prismatic states and limits come back; axes and revolute states never change.
+    #[test]
+    fn a_result_goes_to_fit_units_and_back() {
+        use crate::geom::se3::to_row_major;
+        use crate::io::gt::JointType;
+        use crate::io::result::{FitResult, ResultJoint, FORMAT, VERSION};
+        let n = Normalisation {
+            center: DVec3::new(3.0, -2.0, 10.0),
+            scale: 250.0,
+        };
+        let pose = to_row_major(&DMat4::from_mat3_translation(
+            DMat3::from_rotation_x(0.3),
+            DVec3::new(0.1, 0.2, -0.3),
+        ));
+        let joint = |joint_type, state: Vec<f64>| ResultJoint {
+            child: 1,
+            parent: 0,
+            joint_type,
+            axis: [0.0, 0.6, 0.8],
+            pivot: [0.1, -0.2, 0.3],
+            limits: [state[0], state[1]],
+            state,
+            mimic: None,
+        };
+        let fit = FitResult {
+            format: FORMAT.into(),
+            version: VERSION,
+            frames: 2,
+            canonical_frame: 0,
+            parts: 2,
+            labels: vec![vec![], vec![]],
+            poses: vec![vec![pose; 2]; 2],
+            gaussians: None,
+            tree: None,
+            joints: Some(vec![
+                joint(JointType::Revolute, vec![0.0, 0.5]),
+                joint(JointType::Prismatic, vec![0.0, 0.25]),
+            ]),
+            root_motion: Some(vec![pose; 2]),
+            points: None,
+            info: None,
+        };
+        let mut r = fit.clone();
+        n.result_to_input(&mut r);
+        let j = r.joints.as_ref().unwrap();
+        assert_eq!(j[0].state, vec![0.0, 0.5]);
+        assert_eq!(j[1].state, vec![0.0, 62.5]);
+        assert_eq!(j[1].axis, [0.0, 0.6, 0.8]);
+        n.result_to_fit(&mut r);
+        let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9);
+        for (a, b) in r.poses.iter().flatten().zip(fit.poses.iter().flatten()) {
+            assert!(close(a, b), "{a:?} vs {b:?}");
+        }
+        for (a, b) in r.joints.unwrap().iter().zip(fit.joints.as_ref().unwrap()) {
+            assert!(close(&a.pivot, &b.pivot) && close(&a.state, &b.state));
+            assert!(close(&a.limits, &b.limits));
+        }
     }
 }

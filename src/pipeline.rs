@@ -69,6 +69,12 @@ pub struct FitOptions {
     /// The balanced preset's third attempt ([`third_wanted`]) is fitted so: the parts
     /// stand elsewhere there than in frame 0, a different start than another seed gives.
     pub from_last_frame: bool,
+    /// Sequences of more frames than this are fitted on this many key frames, spread
+    /// evenly, and the frames between them tracked with the articulated model
+    /// (`crate::key_frames`); 0 fits every frame. [`fit`] does it natively; the page
+    /// fits the key frames in its workers and tracks the rest at the end
+    /// (`key_frames::extend_recorded` behind the wasm API's `extend_key_frames`).
+    pub key_frames: usize,
 }
 
 impl Default for FitOptions {
@@ -83,6 +89,7 @@ impl Default for FitOptions {
             restarts: None,
             medial_init: false,
             from_last_frame: false,
+            key_frames: crate::key_frames::DEFAULT_KEY_FRAMES,
         }
     }
 }
@@ -97,6 +104,8 @@ pub enum Stage {
     Select,
     Tree,
     Joints,
+    /// Frames between key frames fitted with the articulated model (`kinematics::track`).
+    Track,
     Done,
 }
 
@@ -186,10 +195,35 @@ pub struct FitOutput {
 /// The whole pipeline: Step 1 with model selection (threads natively), then Steps 2–3;
 /// a balanced fit of full input whose model leaves more than [`RETRY_UNEXPLAINED`] of
 /// the points unexplained is done once more from another seed ([`retry_wanted`],
-/// [`retry_look`]). `cb` reports progress (a second attempt goes through the stages
-/// again) and may cancel at any point.
+/// [`retry_look`]). A sequence longer than `opts.key_frames` is fitted so on its key
+/// frames and the others are tracked with the articulated model (`crate::key_frames`).
+/// `cb` reports progress (a second attempt goes through the stages again) and may
+/// cancel at any point.
 #[cfg(not(target_arch = "wasm32"))]
 pub fn fit(
+    seq: &crate::io::sequence::Sequence,
+    opts: &FitOptions,
+    cb: &(dyn Fn(&Progress) -> Control + Sync),
+) -> crate::Result<FitOutput> {
+    let keys = crate::key_frames::choose(seq.len(), opts.key_frames);
+    if keys.len() == seq.len() {
+        return fit_frames(seq, opts, cb);
+    }
+    let start = std::time::Instant::now();
+    let clock = move || start.elapsed().as_secs_f64();
+    let mut out = fit_frames(&crate::key_frames::sub_sequence(seq, &keys), opts, cb)?;
+    let (result, note) =
+        crate::key_frames::extend_recorded(seq, &keys, out.result, opts.seed, &clock, &mut |p| {
+            cb(p)
+        })?;
+    out.result = result;
+    out.notes.push(note);
+    Ok(out)
+}
+
+/// [`fit`] on every frame of `seq`.
+#[cfg(not(target_arch = "wasm32"))]
+fn fit_frames(
     seq: &crate::io::sequence::Sequence,
     opts: &FitOptions,
     cb: &(dyn Fn(&Progress) -> Control + Sync),

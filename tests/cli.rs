@@ -475,6 +475,57 @@ fn restarts_must_be_one_to_sixteen() {
 }
 
 #[test]
+fn key_frames_must_be_zero_or_at_least_two() {
+    let out = tmp("key_frames").join("r.json");
+    let (ok, _, err) = gsart(&[
+        "fit",
+        "missing_dir_is_not_read",
+        "--key-frames",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert!(
+        err.starts_with("gsart: ") && err.contains("--key-frames"),
+        "{err}"
+    );
+}
+
+/// A sequence longer than `--key-frames` is fitted on its key frames and the others
+/// tracked: every frame is in the result and in the segmented PLYs, and the note says so.
+#[test]
+fn a_long_sequence_is_fitted_on_key_frames() {
+    let dir = tmp("key_frames_fit");
+    let seq = synth_laptop(&dir, 8, 512);
+    let (out, plys) = (dir.join("r.json"), dir.join("ply"));
+    let (ok, _, err) = gsart(&[
+        "fit",
+        seq.to_str().unwrap(),
+        "--quality",
+        "fast",
+        "--parts",
+        "2..3",
+        "--key-frames",
+        "4",
+        "--out",
+        out.to_str().unwrap(),
+        "--ply-out",
+        plys.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("long sequence: Steps 1–3 fitted 4 key frames (0, 2, 5, 7); the other 4 frames were tracked"),
+        "{err}"
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(r["frames"], 8);
+    assert_eq!(r["info"]["key_frames"]["tracked"], 4);
+    assert_eq!(std::fs::read_dir(&plys).unwrap().count(), 8);
+}
+
+#[test]
 fn a_reader_that_closes_the_pipe_early_is_not_a_crash() {
     // `gsart eval … | head -1`: the rest of the output is not wanted, and `println!`
     // would panic on the closed pipe (exit code 101).

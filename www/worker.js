@@ -10,6 +10,8 @@
 //               {id, type: 'copy', m}     (candidate m as bytes, for another worker; kept here too)
 //               {id, type: 'put', bytes}  (a candidate another worker copied, to finish here)
 //               {id, type: 'edit', frames, names, result, edit, gt?, labels?}  (edited by hand, Steps 2–3 again)
+//               {id, type: 'extend', frames, names, keys, result, options, gt?, labels?}  (a result fitted
+//                 on the key frames `keys` of a long sequence, the other frames tracked with its model)
 // Messages out: {id, type: 'progress', ...} (≤ ~20/s), {id, type: 'result', ...}, {id, type: 'error', message}
 // Cancel: the page terminates the worker (a running wasm loop cannot read messages).
 import init, * as gsart from './pkg/gsart.js';
@@ -76,13 +78,19 @@ async function handle(msg) {
       break;
     }
     case 'finish':
-    case 'edit': {
+    case 'edit':
+    case 'extend': {
       const t0 = performance.now();
+      const progress = (p) => postProgress(id, p);
       const result = msg.type === 'finish'
         // Steps 2–3 on a candidate this worker holds (fitted here, or copied here by 'put').
-        ? gsart.finish(msg.frames, msg.names, msg.m, msg.candidates, (p) => postProgress(id, p))
-        // A result edited by hand (parts joined, joint types chosen), then Steps 2–3 again.
-        : gsart.edit_model(msg.frames, msg.names, msg.result, msg.edit, (p) => postProgress(id, p));
+        ? gsart.finish(msg.frames, msg.names, msg.m, msg.candidates, progress)
+        : msg.type === 'edit'
+          // A result edited by hand (parts joined, joint types chosen), then Steps 2–3 again.
+          ? gsart.edit_model(msg.frames, msg.names, msg.result, msg.edit, progress)
+          // A result fitted on key frames, the other frames tracked with its model.
+          : gsart.extend_key_frames(msg.frames, msg.names, Uint32Array.from(msg.keys), msg.result,
+            msg.options, progress);
       let metrics = null;
       let metricsError = null;
       if (msg.gt) {

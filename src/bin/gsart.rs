@@ -64,6 +64,11 @@ mod cli {
             /// Frames larger than this are downsampled for the fit.
             #[arg(long, default_value_t = 4096)]
             working_size: usize,
+            /// Sequences of more frames than this are fitted on this many key frames,
+            /// spread evenly, and the frames between them tracked with the articulated
+            /// model (much faster on long sequences); 0 fits every frame.
+            #[arg(long, default_value_t = gsart::key_frames::DEFAULT_KEY_FRAMES)]
+            key_frames: usize,
             #[command(flatten)]
             outputs: OutputArgs,
         },
@@ -230,6 +235,7 @@ mod cli {
                 restarts,
                 medial_init,
                 working_size,
+                key_frames,
                 outputs,
             } => parse_options(
                 parts.as_deref(),
@@ -240,9 +246,17 @@ mod cli {
                 working_size,
             )
             .and_then(|opts| with_restarts(opts, restarts))
-            .map(|opts| FitOptions {
-                medial_init,
-                ..opts
+            .and_then(|opts| {
+                if key_frames == 1 {
+                    return Err(Error::InvalidArgument(
+                        "--key-frames must be 0 (every frame) or at least 2".into(),
+                    ));
+                }
+                Ok(FitOptions {
+                    medial_init,
+                    key_frames,
+                    ..opts
+                })
             })
             .and_then(|opts| fit(&input, &opts, &outputs.outputs()?, outputs.quiet)),
             Command::Edit {
@@ -387,6 +401,7 @@ mod cli {
             restarts: None,
             medial_init: false,
             from_last_frame: false,
+            key_frames: gsart::key_frames::DEFAULT_KEY_FRAMES,
         })
     }
 

@@ -19,6 +19,7 @@ pub mod relabel;
 pub mod screw;
 pub mod spatial;
 pub mod spin_free;
+pub mod track;
 pub mod tree;
 
 pub use build::{build_articulated, KinOptions, KinReport};

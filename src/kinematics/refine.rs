@@ -147,7 +147,7 @@ pub(crate) struct Model {
 // Parameter layout: per joint j: [axis(3), pivot(3), states(k)], then per frame t:
 // [u(3), φ(3)] of the root.
 impl Model {
-    fn joint_base(&self, j: usize) -> usize {
+    pub(crate) fn joint_base(&self, j: usize) -> usize {
         j * (6 + self.k)
     }
     fn root_base(&self, t: usize) -> usize {
@@ -513,7 +513,12 @@ fn sample_points(pts: &[Vec3], n: usize, rng: &mut StdRng) -> Vec<usize> {
     }
 }
 
-fn build_data(result: &FitResult, points: &[Vec<Vec3>], n: usize, rng: &mut StdRng) -> Data {
+pub(crate) fn build_data(
+    result: &FitResult,
+    points: &[Vec<Vec3>],
+    n: usize,
+    rng: &mut StdRng,
+) -> Data {
     let c = result.canonical_frame;
     let idx = sample_points(&points[c], n, rng);
     let src = idx.iter().map(|&i| points[c][i].as_dvec3()).collect();
@@ -623,9 +628,8 @@ pub fn refine(
 
     let mut x = x0.clone();
     tie_axes(&m, &mut x, &opts.ties, &opts.tie_followers);
-    let (mut mo, mut ve) = (vec![0.0; x.len()], vec![0.0; x.len()]);
+    let mut adam = Adam::new(x.len());
     let mut g = vec![0.0; x.len()];
-    let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-8);
     let prior_w = opts.axis_prior * (m.k.saturating_sub(1)) as f64;
     let mut hints = Hints::default();
     for it in 0..opts.iters {
@@ -647,17 +651,7 @@ pub fn refine(
             Some(&mut g),
             Some(&mut hints),
         ) + axis_prior(&m, &x, &x0, prior_w, &opts.free_axes, &mut g);
-        let lr = opts.lr
-            * (0.1
-                + 0.9
-                    * 0.5
-                    * (1.0 + (std::f64::consts::PI * it as f64 / opts.iters as f64).lcos()));
-        let (c1, c2) = (1.0 - b1.powi(it as i32 + 1), 1.0 - b2.powi(it as i32 + 1));
-        for i in 0..x.len() {
-            mo[i] = b1 * mo[i] + (1.0 - b1) * g[i];
-            ve[i] = b2 * ve[i] + (1.0 - b2) * g[i] * g[i];
-            x[i] -= lr * (mo[i] / c1) / ((ve[i] / c2).sqrt() + eps);
-        }
+        adam.step(&mut x, &g, it, opts.iters, opts.lr);
         tie_axes(&m, &mut x, &opts.ties, &opts.tie_followers);
         if it % 25 == 0 || it + 1 == opts.iters {
             let p = Progress {
@@ -685,6 +679,35 @@ pub fn refine(
         iters: opts.iters,
         uses_emd: use_emd,
     })
+}
+
+/// Adam (β 0.9 / 0.999) with the refinement's cosine decay of the step size to 10 % over
+/// `iters`, so the last iterations settle instead of jittering at the step size.
+pub(crate) struct Adam {
+    mo: Vec<f64>,
+    ve: Vec<f64>,
+}
+
+impl Adam {
+    pub(crate) fn new(n: usize) -> Self {
+        Adam {
+            mo: vec![0.0; n],
+            ve: vec![0.0; n],
+        }
+    }
+
+    /// One step on `x` along gradient `g` at iteration `it` of `iters`.
+    pub(crate) fn step(&mut self, x: &mut [f64], g: &[f64], it: usize, iters: usize, lr: f64) {
+        let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-8);
+        let lr = lr
+            * (0.1 + 0.9 * 0.5 * (1.0 + (std::f64::consts::PI * it as f64 / iters as f64).lcos()));
+        let (c1, c2) = (1.0 - b1.powi(it as i32 + 1), 1.0 - b2.powi(it as i32 + 1));
+        for i in 0..x.len() {
+            self.mo[i] = b1 * self.mo[i] + (1.0 - b1) * g[i];
+            self.ve[i] = b2 * self.ve[i] + (1.0 - b2) * g[i] * g[i];
+            x[i] -= lr * (self.mo[i] / c1) / ((self.ve[i] / c2).sqrt() + eps);
+        }
+    }
 }
 
 fn write_back(result: &mut FitResult, m: &Model, x: &[f64], limit_pad: f64) {

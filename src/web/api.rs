@@ -307,6 +307,43 @@ pub fn finish(
     Ok(out.result.to_json())
 }
 
+/// The frames a fit of `k` frames with `options` runs Steps 1–3 on (`key_frames::choose`
+/// with `options.key_frames`): every frame, or for a long sequence its key frames.
+#[wasm_bindgen]
+pub fn key_frames(k: usize, options: JsValue) -> Result<Vec<u32>, JsError> {
+    let opts = options_from_js(options)?;
+    Ok(crate::key_frames::choose(k, opts.key_frames)
+        .into_iter()
+        .map(|t| t as u32)
+        .collect())
+}
+
+/// A result fitted on the key frames `keys` of `frames` (JSON), extended to every frame:
+/// the others tracked with its articulated model (`key_frames::extend_recorded`).
+/// Returns the extended result's JSON.
+#[wasm_bindgen]
+pub fn extend_key_frames(
+    frames: Array,
+    names: Array,
+    keys: Vec<u32>,
+    result_json: &str,
+    options: JsValue,
+    on_progress: &Function,
+) -> Result<String, JsError> {
+    let seq = sequence_from_js(&frames, &names)?;
+    let opts = options_from_js(options)?;
+    let key = FitResult::from_json(result_json, "result").map_err(js_err)?;
+    let keys: Vec<usize> = keys.into_iter().map(|t| t as usize).collect();
+    let mut throttle = Throttle::new(on_progress);
+    let clock = || js_sys::Date::now() / 1000.0;
+    let (result, _) =
+        crate::key_frames::extend_recorded(&seq, &keys, key, opts.seed, &clock, &mut |p| {
+            throttle.report(p)
+        })
+        .map_err(js_err)?;
+    Ok(result.to_json())
+}
+
 /// A fitted result (JSON) edited by hand (`edit::apply`): `edit` is
 /// `{join: [[a, b, …], …], joint_types: [[part, "revolute"|"prismatic"], …]}` (either
 /// may be left out), in the result's part numbers; the tree and joints are built again
@@ -1015,6 +1052,7 @@ fn stage_name(s: Stage) -> &'static str {
         Stage::Select => "select",
         Stage::Tree => "tree",
         Stage::Joints => "joints",
+        Stage::Track => "track",
         Stage::Done => "done",
     }
 }

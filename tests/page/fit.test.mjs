@@ -5,8 +5,9 @@
 // every part count on occluded frames (the core's rule), fast tries one part count
 // above the range when the top of it fails, a poorly explained balanced fit is done
 // again from another seed (and a third time from the last frame when the kept attempt
-// still explains little), and the page's results equal the CLI's bit for bit (talos
-// full, the procedural cabinet, so101 occluded).
+// still explains little), a long sequence is fitted on key frames and the others
+// tracked, and the page's results equal the CLI's bit for bit (talos full, the
+// procedural cabinet and a long laptop sequence, so101 occluded).
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import fs from 'node:fs';
@@ -367,6 +368,27 @@ test('a poorly explained balanced fit is done again from another seed, and a thi
   assert.deepEqual(look(got.info.third), look(want.info.third), 'the same third attempt and the same one kept');
   assert.match(status, /A third attempt from the last frame; the (third|earlier one) was kept/);
   assert.ok(got.info.notes.some((n) => /^third attempt/.test(n)), 'the notes say why the fit was done a third time');
+});
+
+test('a long sequence is fitted on its key frames and the others tracked, as the CLI does', { timeout: FIT_TIMEOUT, skip: NO_CLI }, async () => {
+  // The procedural laptop over 16 frames: Steps 1–3 on 12 key frames (the core's
+  // default), the other 4 tracked with the model (`key_frames::extend_recorded`).
+  const dir = path.join(ARTIFACTS, 'laptop-long');
+  fs.rmSync(dir, { recursive: true, force: true });
+  execFileSync(CLI, ['synth', 'laptop', '--frames', '16', '--seed', '0', '--out', dir], { stdio: 'ignore' });
+  let stages = '';
+  const { got, want, status } = await cliAndPage(dir, 'laptop-long', async (page) => {
+    await page.waitForFunction(() => /fitted on 12 key frames of 16/.test(document.querySelector('#fit-status').innerText));
+    stages = await page.locator('#stage-list').innerText();
+  }, { parts: [2, 3] });
+  assert.match(stages, /Tracking the frames between key frames/);
+  assert.equal(got.frames, 16);
+  assert.equal(got.labels.length, 16);
+  assert.deepEqual(got.info.key_frames.frames, want.info.key_frames.frames);
+  assert.equal(got.info.key_frames.tracked, 4);
+  assert.deepEqual(got.joints, want.joints, 'the same joints and states on every frame as the CLI');
+  assert.ok(got.info.notes.some((n) => /^long sequence: Steps 1–3 fitted 12 key frames/.test(n)));
+  assert.match(status, /tracking the 4 frames between the 12 key frames: [\d.]+ s\./);
 });
 
 test('cancelling a second attempt keeps the first attempt\'s model as the result', { timeout: FIT_TIMEOUT, skip: NO_CLI }, async () => {

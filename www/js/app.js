@@ -539,15 +539,18 @@ const STAGES = [
   { key: 'select', name: 'Choosing the part count' },
   { key: 'tree', name: 'Step 2 · kinematic tree' },
   { key: 'joints', name: 'Step 3 · joints' },
+  { key: 'track', name: 'Tracking the frames between key frames' },
   { key: 'metrics', name: 'Metrics against ground truth' },
 ];
 
-function buildStages(withMetrics) {
+// `withTrack`: a long sequence, fitted on key frames and the other frames tracked.
+function buildStages(withMetrics, withTrack = false) {
   const box = $('stage-list');
   box.replaceChildren();
   S.stageEls = {};
   for (const st of STAGES) {
     if (st.key === 'metrics' && !withMetrics) continue;
+    if (st.key === 'track' && !withTrack) continue;
     const row = document.createElement('div');
     row.className = 'stage-row pending';
     row.innerHTML = `<span class="sname"></span><span class="seta"></span><div class="bar" role="progressbar" aria-valuemin="0" aria-valuemax="100" aria-valuenow="0"><div></div></div>`;
@@ -651,7 +654,15 @@ async function startFit() {
   stopPlay();
   resetResult();
   const gtOk = hasTruth(good);
-  buildStages(!!gtOk);
+  // A long sequence is fitted on its key frames (the core's choice), and the other
+  // frames are tracked with the model at the end (`key_frames::extend_recorded`), as
+  // `gsart fit` does.
+  let keys;
+  try { keys = Array.from(wasm.key_frames(good.length, opts)); } catch (e) { toast(errText(e), 'error'); return; }
+  const keyed = keys.length < good.length;
+  const fitGood = keyed ? keys.map((k) => good[k]) : good;
+  S.fitKeys = keyed ? keys : null;
+  buildStages(!!gtOk, keyed);
   $('progress').hidden = false;
   $('step-fit').scrollIntoView({ block: 'start', behavior: 'smooth' });
   S.chart.clear(...STEP1_CHART);
@@ -661,7 +672,7 @@ async function startFit() {
   // range, unless the frames are fitted as occluded).
   let parts;
   try {
-    parts = Array.from(wasm.candidate_parts(good.map((f) => f.points), good.map((f) => f.name),
+    parts = Array.from(wasm.candidate_parts(fitGood.map((f) => f.points), fitGood.map((f) => f.name),
       range[0], range[1], opts));
   } catch (e) {
     $('fit-status').innerHTML = `<span class="msg-error">${escapeHtml(errText(e))}</span>`;
@@ -674,7 +685,8 @@ async function startFit() {
     : whole ? `m = ${range[0]}…${range[1]}` : `m = ${parts.join(', ')} of ${range[0]}…${range[1]}`;
   const fits = (opts.restarts > 1 ? `, best of ${opts.restarts} fits each` : '')
     + (opts.medial_init ? ', started on the medial axis' : '');
-  const trying = `Trying ${tried} Gaussians (${par} in parallel${fits}), ${opts.quality} quality.`;
+  const longSeq = keyed ? ` A long sequence: fitted on ${keys.length} key frames of ${good.length}, the others tracked after.` : '';
+  const trying = `Trying ${tried} Gaussians (${par} in parallel${fits}), ${opts.quality} quality.${longSeq}`;
   $('fit-status').innerHTML = trying;
   let job = null; // the attempt running now
   // One attempt of the whole fit with these options (the core may ask for a second,
@@ -715,12 +727,13 @@ async function startFit() {
     S.focusM = null;
     S.gaussiansSnapshot = null;
     job = new FitJob({
-      frames: good.map((f) => f.points),
-      names: good.map((f) => f.name),
+      frames: fitGood.map((f) => f.points),
+      names: fitGood.map((f) => f.name),
       options: jobOpts,
       parts,
-      gt: gtOk ? S.gt : null,
-      labels: gtOk ? good.map((f) => f.labels) : null,
+      // Key frames get their metrics after the tracking, on every frame.
+      gt: gtOk && !keyed ? S.gt : null,
+      labels: gtOk && !keyed ? good.map((f) => f.labels) : null,
       bestOf: (ms, losses) => wasm.best_candidate(Uint32Array.from(ms), Float64Array.from(losses)),
       extraCandidate: (ms, losses, occluded) => wasm.extra_candidate(Uint32Array.from(ms), Float64Array.from(losses),
         jobOpts, occluded, jobOpts.parts === null) ?? null,
@@ -799,6 +812,8 @@ async function startFit() {
   // it as the result.
   const keptCandidate = (o) => o.candidates.find((c) => c.m === o.best) ?? null;
   const showProvisional = (o, note) => {
+    // A key-frame model does not match the loaded frames until it is tracked.
+    if (keyed) return;
     openResult(o.result, S.seqName, 'fit', { best: keptCandidate(o), metrics: o.metrics, metricsError: o.metricsError, provisional: note });
   };
   const t0 = performance.now();
@@ -818,7 +833,7 @@ async function startFit() {
       const first = out;
       const share = (100 * retry.unexplained).toFixed(2);
       showProvisional(first, `Provisional: the first attempt's model, shown while a second attempt runs (this one left ${share} % of the points unexplained). Cancel to keep it.`);
-      buildStages(!!gtOk);
+      buildStages(!!gtOk, keyed);
       S.chart.clear(...STEP1_CHART);
       $('fit-status').innerHTML = `The model left ${share} % of the points unexplained: fitting again from seed ${again.seed}; its model is on view meanwhile, and Cancel keeps it. ${trying}`;
       let second = null;
@@ -842,7 +857,7 @@ async function startFit() {
         const kept = out;
         const share3 = (100 * third.unexplained).toFixed(2);
         showProvisional(kept, `Provisional: the model kept from the first two attempts, shown while a third runs (it left ${share3} % of the points unexplained). Cancel to keep it.`);
-        buildStages(!!gtOk);
+        buildStages(!!gtOk, keyed);
         S.chart.clear(...STEP1_CHART);
         $('fit-status').innerHTML = `The model kept left ${share3} % of the points unexplained: fitting a third time, with the Gaussians placed on the last frame; that model is on view meanwhile, and Cancel keeps it. ${trying}`;
         let res3 = null;
@@ -859,6 +874,28 @@ async function startFit() {
           retried += `A third attempt from the last frame; the ${look.third ? 'third' : 'earlier one'} was kept. `;
         }
       }
+    }
+    if (keyed && S.job === job) {
+      // Every frame between key frames gets the model's root motion and joint states
+      // that fit it, then the metrics on every frame.
+      $('fit-status').innerHTML = `Tracking the other ${good.length - keys.length} frames with the model fitted on ${keys.length} key frames…`;
+      const frames = good.map((f) => f.points.slice());
+      const t1 = performance.now();
+      const ext = new WorkerJob(
+        {
+          type: 'extend', frames, names: good.map((f) => f.name), keys, result: out.result, options: opts,
+          gt: gtOk ? S.gt : null, labels: gtOk ? good.map((f) => f.labels) : null,
+        },
+        frames.map((a) => a.buffer),
+        (msg) => {
+          if (msg.type === 'progress' && S.stageEls[msg.stage]) setStage(msg.stage, msg.total ? msg.iter / msg.total : 0);
+        },
+      );
+      // Cancel stops the tracking; the fit then ends like any cancelled one.
+      job = { cancel: () => ext.cancel() };
+      S.job = job;
+      const r = await ext.promise;
+      out = { ...out, result: r.result, metrics: r.metrics, metricsError: r.metricsError, trackMs: performance.now() - t1 };
     }
   } catch (e) {
     if (S.job !== job) return; // replaced or cancelled by a new load
@@ -882,7 +919,8 @@ async function startFit() {
   const attempts = attemptMs.length > 1
     ? `The attempts took ${attemptMs.map(sec1).join(', ')}; the kept one's ` : '';
   $('fit-status').innerHTML = `<span class="msg-good">Done in ${fmtTime(secs)}.</span> ${retried}`
-    + `${attempts}Step 1: m = ${perCand}; Steps 2–3: ${sec1(out.finishMs)}.`;
+    + `${attempts}Step 1: m = ${perCand}; Steps 2–3: ${sec1(out.finishMs)}`
+    + (out.trackMs !== undefined ? `; tracking the ${good.length - keys.length} frames between the ${keys.length} key frames: ${sec1(out.trackMs)}.` : '.');
   openResult(out.result, S.seqName, 'fit', { seconds: secs, best, metrics: out.metrics, metricsError: out.metricsError });
 }
 
@@ -894,7 +932,7 @@ function showSnapshot(m, snap) {
   S.view.setPoints(pts, snap.labels);
   const nG = snap.centers.length / 3;
   S.view.setGaussians(snap.centers, snap.rotations, snap.scales, Uint32Array.from({ length: nG }, (_, i) => i));
-  $('hud-sub').textContent = `fitting m = ${m} · frame ${snap.frame + 1}`;
+  $('hud-sub').textContent = `fitting m = ${m} · frame ${(S.fitKeys?.[snap.frame] ?? snap.frame) + 1}`;
 }
 
 // ------------------------------------------------------------------ results
