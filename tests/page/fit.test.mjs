@@ -371,24 +371,24 @@ test('a poorly explained balanced fit is done again from another seed, and a thi
 });
 
 test('a long sequence is fitted on its key frames and the others tracked, as the CLI does', { timeout: FIT_TIMEOUT, skip: NO_CLI }, async () => {
-  // The procedural laptop over 16 frames: Steps 1–3 on 12 key frames (the core's
+  // The procedural laptop over 24 frames: Steps 1–3 on 20 key frames (the core's
   // default), the other 4 tracked with the model (`key_frames::extend_recorded`).
   const dir = path.join(ARTIFACTS, 'laptop-long');
   fs.rmSync(dir, { recursive: true, force: true });
-  execFileSync(CLI, ['synth', 'laptop', '--frames', '16', '--seed', '0', '--out', dir], { stdio: 'ignore' });
+  execFileSync(CLI, ['synth', 'laptop', '--frames', '24', '--seed', '0', '--out', dir], { stdio: 'ignore' });
   let stages = '';
   const { got, want, status } = await cliAndPage(dir, 'laptop-long', async (page) => {
-    await page.waitForFunction(() => /fitted on 12 key frames of 16/.test(document.querySelector('#fit-status').innerText));
+    await page.waitForFunction(() => /fitted on 20 key frames of 24/.test(document.querySelector('#fit-status').innerText));
     stages = await page.locator('#stage-list').innerText();
   }, { parts: [2, 3] });
   assert.match(stages, /Tracking the frames between key frames/);
-  assert.equal(got.frames, 16);
-  assert.equal(got.labels.length, 16);
+  assert.equal(got.frames, 24);
+  assert.equal(got.labels.length, 24);
   assert.deepEqual(got.info.key_frames.frames, want.info.key_frames.frames);
   assert.equal(got.info.key_frames.tracked, 4);
   assert.deepEqual(got.joints, want.joints, 'the same joints and states on every frame as the CLI');
-  assert.ok(got.info.notes.some((n) => /^long sequence: Steps 1–3 fitted 12 key frames/.test(n)));
-  assert.match(status, /tracking the 4 frames between the 12 key frames: [\d.]+ s\./);
+  assert.ok(got.info.notes.some((n) => /^long sequence: Steps 1–3 fitted 20 key frames/.test(n)));
+  assert.match(status, /tracking the 4 frames between the 20 key frames: [\d.]+ s\./);
 });
 
 test('cancelling a second attempt keeps the first attempt\'s model as the result', { timeout: FIT_TIMEOUT, skip: NO_CLI }, async () => {

@@ -523,6 +523,7 @@ function readOptions() {
     seed: Math.max(0, Math.round(Number($('seed').value) || 0)),
     restarts: Math.min(3, Math.max(1, Math.round(Number($('restarts').value) || 1))),
     medial_init: $('medial-init').checked,
+    key_frames: Math.max(0, Math.round(Number($('key-frames').value) || 0)),
     parts: null,
   };
   if (!auto) {
@@ -1684,6 +1685,7 @@ function applyUrlSettings() {
   if (values.seed !== undefined) $('seed').value = String(values.seed);
   if (values.restarts) $('restarts').value = String(values.restarts);
   if (values.medial_init !== undefined) $('medial-init').checked = values.medial_init;
+  if (values.key_frames !== undefined) $('key-frames').value = String(values.key_frames);
   if (values.parts) {
     $('parts-min').value = String(values.parts[0]);
     $('parts-max').value = String(values.parts[1]);

@@ -3,7 +3,9 @@
 // settings, and the page's equals the CLI's). Parsing and writing are pure; the page
 // applies the values to its form.
 
-export const DEFAULTS = { quality: 'balanced', occlusion: 'auto', seed: 0, restarts: 1, medial_init: false, parts: null };
+export const DEFAULTS = { quality: 'balanced', occlusion: 'auto', seed: 0, restarts: 1, medial_init: false, key_frames: 20, parts: null };
+// The page's choices of key frames for long sequences (0: every frame).
+const KEY_FRAMES = [20, 12, 40, 0];
 
 const QUALITIES = ['fast', 'balanced', 'paper'];
 const OCCLUSIONS = ['auto', 'on', 'off'];
@@ -42,6 +44,11 @@ export function settingsFromParams(params) {
     if (m === '0' || m === '1') values.medial_init = m === '1';
     else problems.push(`medial=${m}: use 0 or 1`);
   }
+  const kf = get('keys');
+  if (kf !== null) {
+    if (/^\d{1,2}$/.test(kf) && KEY_FRAMES.includes(Number(kf))) values.key_frames = Number(kf);
+    else problems.push(`keys=${kf}: use ${KEY_FRAMES.join(', ')} (0: every frame)`);
+  }
   const p = get('parts');
   if (p !== null) {
     // "3..7" as the CLI writes it, or "3-7"; one number is a single part count.
@@ -55,7 +62,7 @@ export function settingsFromParams(params) {
 }
 
 /** The query parameters of the settings (and `example_seed`, see `exampleSeed`). */
-export const SETTING_KEYS = ['quality', 'occlusion', 'seed', 'restarts', 'medial', 'parts', 'example_seed'];
+export const SETTING_KEYS = ['quality', 'occlusion', 'seed', 'restarts', 'medial', 'keys', 'parts', 'example_seed'];
 
 /**
  * The seed an example is generated with: `example_seed` when the link has it (the
@@ -78,6 +85,7 @@ export function writeSettings(url, opts, genSeed = opts.seed) {
   if (opts.seed !== DEFAULTS.seed) sp.set('seed', String(opts.seed));
   if (opts.restarts !== DEFAULTS.restarts) sp.set('restarts', String(opts.restarts));
   if (opts.medial_init) sp.set('medial', '1');
+  if (opts.key_frames !== undefined && opts.key_frames !== DEFAULTS.key_frames) sp.set('keys', String(opts.key_frames));
   if (opts.parts) sp.set('parts', `${opts.parts[0]}..${opts.parts[1]}`);
   if (genSeed !== opts.seed) sp.set('example_seed', String(genSeed));
   return url;
