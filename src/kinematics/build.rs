@@ -313,7 +313,8 @@ pub fn still_joints(result: &FitResult) -> Vec<(usize, usize)> {
         .collect()
 }
 
-fn progress_to(
+/// Reports `stage` at `iter` of `total` with `losses`; a cancel becomes `Error::Cancelled`.
+pub(crate) fn progress_to(
     progress: &mut dyn FnMut(&Progress) -> Control,
     stage: Stage,
     iter: usize,

@@ -654,17 +654,8 @@ pub fn refine(
         adam.step(&mut x, &g, it, opts.iters, opts.lr);
         tie_axes(&m, &mut x, &opts.ties, &opts.tie_followers);
         if it % 25 == 0 || it + 1 == opts.iters {
-            let p = Progress {
-                stage: Stage::Joints,
-                m: None,
-                iter: it,
-                total: opts.iters,
-                losses: vec![("refine".to_string(), loss)],
-                snapshot: None,
-            };
-            if progress(&p) == Control::Cancel {
-                return Err(crate::Error::Cancelled);
-            }
+            let losses = vec![("refine".to_string(), loss)];
+            super::build::progress_to(progress, Stage::Joints, it, opts.iters, losses)?;
         }
     }
     let loss_after = eval_loss(&x, &mut lap);

@@ -9,6 +9,7 @@
 use glam::{DMat4, Vec3};
 use rand::{rngs::StdRng, SeedableRng};
 
+use super::build::progress_to;
 use super::refine::{build_data, loss_grad, model_from_result, Adam, Hints};
 use crate::geom::se3::to_row_major;
 use crate::io::result::FitResult;
@@ -54,12 +55,13 @@ pub struct Configuration {
 /// Fits the configuration of each of `frames` from `starts` (one per frame), for the
 /// articulated `model` (tree, joints and root motion, in the units of the points).
 /// `canonical` are the points of the model's canonical frame, `labels` their parts.
+/// The frames are taken by value: their points are sampled, then dropped.
 /// Progress is reported as `Stage::Track`; a cancel stops it.
 pub fn track(
     model: &FitResult,
     canonical: &[Vec3],
     labels: &[u32],
-    frames: &[Vec<Vec3>],
+    frames: Vec<Vec<Vec3>>,
     starts: &[Configuration],
     opts: &TrackOptions,
     progress: &mut dyn FnMut(&Progress) -> Control,
@@ -86,7 +88,7 @@ pub fn track(
     }
     // A model of the canonical frame (frame 0) and the frames to track: the chain's
     // parameter layout, with the key frames' structure and the starts' states.
-    let k = 1 + frames.len();
+    let (k, tracked) = (1 + frames.len(), frames.len());
     let mut joints = joints.clone();
     for (j, jt) in joints.iter_mut().enumerate() {
         jt.state = std::iter::once(0.0)
@@ -96,8 +98,9 @@ pub fn track(
     let chain = FitResult {
         frames: k,
         canonical_frame: 0,
+        // Only the canonical frame's labels are read (`build_data`).
         labels: std::iter::once(labels.to_vec())
-            .chain(frames.iter().map(|f| vec![0; f.len()]))
+            .chain(std::iter::repeat_n(Vec::new(), tracked))
             .collect(),
         poses: Vec::new(),
         joints: Some(joints),
@@ -112,9 +115,7 @@ pub fn track(
         ..model.clone()
     };
     let (m, mut x) = model_from_result(&chain, true)?;
-    let points: Vec<Vec<Vec3>> = std::iter::once(canonical.to_vec())
-        .chain(frames.iter().cloned())
-        .collect();
+    let points: Vec<Vec<Vec3>> = std::iter::once(canonical.to_vec()).chain(frames).collect();
     let mut rng = StdRng::seed_from_u64(opts.seed);
     let data = build_data(&chain, &points, opts.sample, &mut rng);
     drop(points);
@@ -131,17 +132,8 @@ pub fn track(
         }
         adam.step(&mut x, &g, it, opts.iters, opts.lr);
         if it % 10 == 0 || it + 1 == opts.iters {
-            let p = Progress {
-                stage: Stage::Track,
-                m: None,
-                iter: it,
-                total: opts.iters,
-                losses: vec![("track".to_string(), loss / frames.len() as f64)],
-                snapshot: None,
-            };
-            if progress(&p) == Control::Cancel {
-                return Err(crate::Error::Cancelled);
-            }
+            let losses = vec![("track".to_string(), loss / tracked as f64)];
+            progress_to(progress, Stage::Track, it, opts.iters, losses)?;
         }
     }
     let root = m.order[0];
@@ -293,7 +285,7 @@ mod tests {
             iters: 150,
             ..Default::default()
         };
-        let got = track(&model, &pts, &labels, &frames, &starts, &opts, &mut |_| {
+        let got = track(&model, &pts, &labels, frames, &starts, &opts, &mut |_| {
             Control::Continue
         })
         .unwrap();
@@ -334,7 +326,7 @@ mod tests {
             &model,
             &pts,
             &labels,
-            &frames,
+            frames.clone(),
             std::slice::from_ref(&start),
             &TrackOptions::default(),
             &mut |_| Control::Continue,
@@ -350,7 +342,7 @@ mod tests {
             &model,
             &pts,
             &labels,
-            &frames,
+            frames,
             &[start],
             &TrackOptions::default(),
             &mut |_| Control::Cancel,
