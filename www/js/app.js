@@ -812,6 +812,8 @@ async function startFit() {
   // far while the next attempt runs: it can be explored and exported, and a cancel keeps
   // it as the result.
   const keptCandidate = (o) => o.candidates.find((c) => c.m === o.best) ?? null;
+  // What the status says of the earlier attempt's model while another runs.
+  const onView = keyed ? '' : '; its model is on view meanwhile, and Cancel keeps it';
   const showProvisional = (o, note) => {
     // A key-frame model does not match the loaded frames until it is tracked.
     if (keyed) return;
@@ -836,7 +838,7 @@ async function startFit() {
       showProvisional(first, `Provisional: the first attempt's model, shown while a second attempt runs (this one left ${share} % of the points unexplained). Cancel to keep it.`);
       buildStages(!!gtOk, keyed);
       S.chart.clear(...STEP1_CHART);
-      $('fit-status').innerHTML = `The model left ${share} % of the points unexplained: fitting again from seed ${again.seed}; its model is on view meanwhile, and Cancel keeps it. ${trying}`;
+      $('fit-status').innerHTML = `The model left ${share} % of the points unexplained: fitting again from seed ${again.seed}${onView}. ${trying}`;
       let second = null;
       try {
         second = await attempt(again);
@@ -860,7 +862,7 @@ async function startFit() {
         showProvisional(kept, `Provisional: the model kept from the first two attempts, shown while a third runs (it left ${share3} % of the points unexplained). Cancel to keep it.`);
         buildStages(!!gtOk, keyed);
         S.chart.clear(...STEP1_CHART);
-        $('fit-status').innerHTML = `The model kept left ${share3} % of the points unexplained: fitting a third time, with the Gaussians placed on the last frame; that model is on view meanwhile, and Cancel keeps it. ${trying}`;
+        $('fit-status').innerHTML = `The model kept left ${share3} % of the points unexplained: fitting a third time, with the Gaussians placed on the last frame${onView.replace('its model', 'that model')}. ${trying}`;
         let res3 = null;
         try {
           res3 = await attempt({ ...opts, from_last_frame: true });
