@@ -9,6 +9,7 @@ use crate::geom::knn::Grid;
 use crate::geom::se3::{from_row_major, to_row_major};
 use crate::io::result::FitResult;
 use crate::io::sequence::Sequence;
+use crate::kinematics::observed::{polish_motions, POLISH_GAIN, POLISH_KEEP, POLISH_ROUNDS};
 use crate::kinematics::track::{track, Configuration, TrackOptions};
 use crate::normalisation::Normalisation;
 use crate::pipeline::{Control, Progress};
@@ -56,8 +57,8 @@ pub struct Extension {
 /// The result `key`, fitted on the frames `keys` of `seq` ([`sub_sequence`]), extended
 /// to every frame of `seq`: each frame between key frames gets the root motion and
 /// joint states the articulated model fits it with, started from the interpolation of
-/// its neighbouring key frames' configurations; its part poses by forward kinematics,
-/// its points labelled by the nearest point of the canonical frame so moved, and the
+/// its neighbouring key frames' configurations; its part poses by forward kinematics
+/// (on full input polished as the key frames' are), its points labelled by the nearest point of the canonical frame so moved, and the
 /// Gaussians carried by their parts. `clock` gives seconds.
 pub fn extend(
     seq: &Sequence,
@@ -130,7 +131,7 @@ pub fn extend(
         .iter()
         .map(|&t| to_fit(&seq.frames[t].points))
         .collect();
-    let found = track(
+    let mut found = track(
         &fit_key,
         &canonical,
         canonical_labels,
@@ -139,6 +140,30 @@ pub fn extend(
         opts,
         progress,
     )?;
+    // On full input Steps 2–3 polish every key frame's reported part poses by trimmed
+    // ICP to its cloud (`observed::polish_poses`, taken where it fits clearly better);
+    // the tracked frames get the same.
+    let occluded = key
+        .info
+        .as_ref()
+        .and_then(|i| i.get("occlusion_used"))
+        .and_then(serde_json::Value::as_bool)
+        .unwrap_or(true);
+    if !occluded {
+        for (conf, &t) in found.iter_mut().zip(&tracked) {
+            let cloud = [to_fit(&seq.frames[t].points)];
+            polish_motions(
+                std::slice::from_mut(&mut conf.poses),
+                usize::MAX,
+                &canonical,
+                canonical_labels,
+                &cloud,
+                POLISH_ROUNDS,
+                POLISH_KEEP,
+                POLISH_GAIN,
+            );
+        }
+    }
 
     // Per frame of `seq`: the index into the key result or into the tracked frames.
     enum Source {
