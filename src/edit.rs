@@ -158,8 +158,8 @@ pub fn apply(
     types.extend(joint_types(old, &map, root, &edit.joint_types)?);
     let canonical = old.canonical_frame;
     let info = old.info.as_ref();
-    let occluded = match info.and_then(|i| i.get("occlusion_used")) {
-        Some(v) => v.as_bool().unwrap_or(false),
+    let occluded = match old.occlusion_used() {
+        Some(o) => o,
         None => crate::fit::select::will_be_occluded(seq, &Default::default())?,
     };
     // Steps 2–3 run in fit units on working clouds of the fit's size (the same

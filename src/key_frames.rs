@@ -9,7 +9,9 @@ use crate::geom::knn::Grid;
 use crate::geom::se3::{from_row_major, to_row_major};
 use crate::io::result::FitResult;
 use crate::io::sequence::Sequence;
-use crate::kinematics::observed::{polish_motions, POLISH_GAIN, POLISH_KEEP, POLISH_ROUNDS};
+use crate::kinematics::observed::{
+    points_by_part, polish_frame, POLISH_GAIN, POLISH_KEEP, POLISH_ROUNDS,
+};
 use crate::kinematics::track::{track, Configuration, TrackOptions};
 use crate::normalisation::Normalisation;
 use crate::pipeline::{Control, Progress};
@@ -135,35 +137,12 @@ pub fn extend(
         &fit_key,
         &canonical,
         canonical_labels,
-        frames,
+        &frames,
         &starts,
         opts,
         progress,
     )?;
-    // On full input Steps 2–3 polish every key frame's reported part poses by trimmed
-    // ICP to its cloud (`observed::polish_poses`, taken where it fits clearly better);
-    // the tracked frames get the same.
-    let occluded = key
-        .info
-        .as_ref()
-        .and_then(|i| i.get("occlusion_used"))
-        .and_then(serde_json::Value::as_bool)
-        .unwrap_or(true);
-    if !occluded {
-        for (conf, &t) in found.iter_mut().zip(&tracked) {
-            let cloud = [to_fit(&seq.frames[t].points)];
-            polish_motions(
-                std::slice::from_mut(&mut conf.poses),
-                usize::MAX,
-                &canonical,
-                canonical_labels,
-                &cloud,
-                POLISH_ROUNDS,
-                POLISH_KEEP,
-                POLISH_GAIN,
-            );
-        }
-    }
+    let occluded = key.occlusion_used().unwrap_or(true);
 
     // Per frame of `seq`: the index into the key result or into the tracked frames.
     enum Source {
@@ -174,13 +153,62 @@ pub fn extend(
         Ok(i) => Source::Key(i),
         Err(_) => Source::Tracked(tracked.binary_search(&t).unwrap_or(0)),
     };
-    // Poses in fit units for every frame, then the result back in input units.
-    let fit_poses: Vec<Vec<DMat4>> = (0..k)
-        .map(|t| match source(t) {
-            Source::Key(i) => fit_key.poses[i].iter().map(from_row_major).collect(),
-            Source::Tracked(i) => found[i].poses.clone(),
-        })
-        .collect();
+    // One pass over the frames in fit units, with one grid of each frame's points. On
+    // full input Steps 2–3 polish every key frame's part poses by trimmed ICP to its
+    // cloud (`observed::polish_poses`, taken where it fits clearly better): a tracked
+    // frame gets the same. Its points then take the part of the nearest canonical point
+    // moved to the frame, and every frame's Chamfer to the model is measured for the
+    // report.
+    let by_part = points_by_part(&canonical, canonical_labels, fit_key.parts);
+    let polish = (POLISH_ROUNDS, POLISH_KEEP, POLISH_GAIN);
+    let mut bufs = (Vec::new(), Vec::new());
+    let mut moved = vec![Vec3::ZERO; canonical.len()];
+    let (mut model_grid, mut frame_grid) = (Grid::default(), Grid::default());
+    let mut fit_poses: Vec<Vec<DMat4>> = Vec::with_capacity(k);
+    let mut labels = Vec::with_capacity(k);
+    let mut key_cd = Vec::with_capacity(keys.len());
+    let mut tracked_cd = Vec::with_capacity(tracked.len());
+    for t in 0..k {
+        let key_points;
+        let (pts, mut poses, key_index) = match source(t) {
+            Source::Key(i) => {
+                key_points = to_fit(&seq.frames[t].points);
+                let poses = fit_key.poses[i].iter().map(from_row_major).collect();
+                (&key_points[..], poses, Some(i))
+            }
+            Source::Tracked(i) => (&frames[i][..], std::mem::take(&mut found[i].poses), None),
+        };
+        frame_grid.rebuild(pts);
+        if !occluded && key_index.is_none() && !pts.is_empty() {
+            polish_frame(&mut poses, &by_part, &frame_grid, pts, polish, &mut bufs);
+        }
+        for ((y, x), &l) in moved.iter_mut().zip(&canonical).zip(canonical_labels) {
+            *y = poses[l as usize].transform_point3(x.as_dvec3()).as_vec3();
+        }
+        model_grid.rebuild(&moved);
+        let cd = chamfer((&moved, &model_grid), (pts, &frame_grid));
+        match key_index {
+            Some(i) => {
+                key_cd.push(cd);
+                labels.push(key.labels[i].clone());
+            }
+            None => {
+                tracked_cd.push(cd);
+                labels.push(
+                    pts.iter()
+                        .map(|&p| {
+                            model_grid
+                                .nearest(p)
+                                .map_or(0, |(i, _)| canonical_labels[i as usize])
+                        })
+                        .collect(),
+                );
+            }
+        }
+        fit_poses.push(poses);
+    }
+    drop(frames);
+
     let mut out = FitResult {
         frames: k,
         canonical_frame: c,
@@ -227,40 +255,6 @@ pub fn extend(
     };
     norm.result_to_input(&mut out);
 
-    // Labels: every point of a tracked frame takes the part of the nearest canonical
-    // point moved to that frame. Per-frame Chamfer of the model, for the report.
-    let mut moved = vec![Vec3::ZERO; canonical.len()];
-    let mut grid = Grid::default();
-    let mut key_cd = Vec::with_capacity(keys.len());
-    let mut tracked_cd = Vec::with_capacity(tracked.len());
-    let mut labels = Vec::with_capacity(k);
-    for (t, f) in seq.frames.iter().enumerate() {
-        for ((y, x), &l) in moved.iter_mut().zip(&canonical).zip(canonical_labels) {
-            *y = fit_poses[t][l as usize]
-                .transform_point3(x.as_dvec3())
-                .as_vec3();
-        }
-        grid.rebuild(&moved);
-        let pts = to_fit(&f.points);
-        let cd = chamfer(&moved, &grid, &pts);
-        match source(t) {
-            Source::Key(i) => {
-                key_cd.push(cd);
-                labels.push(key.labels[i].clone());
-            }
-            Source::Tracked(_) => {
-                tracked_cd.push(cd);
-                labels.push(
-                    pts.iter()
-                        .map(|&p| {
-                            grid.nearest(p)
-                                .map_or(0, |(i, _)| canonical_labels[i as usize])
-                        })
-                        .collect(),
-                );
-            }
-        }
-    }
     out.labels = labels;
     // The Gaussians move with their parts: poses[t] · poses[c]⁻¹ carries a Gaussian of
     // the canonical frame (poses[c] is the identity up to rounding).
@@ -353,8 +347,8 @@ fn interpolate(a: &DMat4, b: &DMat4, w: f64) -> DMat4 {
     DMat4::from_rotation_translation(DQuat::slerp(ra, rb, w), ta.lerp(tb, w))
 }
 
-/// Bidirectional squared Chamfer (means) between `model` (indexed by `grid`) and `pts`.
-fn chamfer(model: &[Vec3], grid: &Grid, pts: &[Vec3]) -> f64 {
+/// Bidirectional squared Chamfer (means) between `model` and `pts`, each with its grid.
+fn chamfer((model, grid): (&[Vec3], &Grid), (pts, pg): (&[Vec3], &Grid)) -> f64 {
     if model.is_empty() || pts.is_empty() {
         return 0.0;
     }
@@ -363,7 +357,6 @@ fn chamfer(model: &[Vec3], grid: &Grid, pts: &[Vec3]) -> f64 {
         .filter_map(|&p| grid.nearest(p).map(|(_, d)| d as f64))
         .sum::<f64>()
         / pts.len() as f64;
-    let pg = Grid::new(pts);
     let to_pts: f64 = model
         .iter()
         .filter_map(|&y| pg.nearest(y).map(|(_, d)| d as f64))

@@ -453,43 +453,30 @@ fn the_urdf_comes_with_its_link_meshes_or_boxes() {
     assert!(!ok && err.contains("ball"), "{err}");
 }
 
+/// `gsart fit` refuses `flag value` before reading its input, naming the flag.
+fn fit_refuses(name: &str, flag: &str, value: &str) {
+    let out = tmp(name).join("r.json");
+    let (ok, _, err) = gsart(&[
+        "fit",
+        "missing_dir_is_not_read",
+        flag,
+        value,
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!ok, "{flag} {value} accepted");
+    assert!(err.starts_with("gsart: ") && err.contains(flag), "{err}");
+}
+
 #[test]
 fn restarts_must_be_one_to_sixteen() {
-    let dir = tmp("restarts");
-    let out = dir.join("r.json");
-    for n in ["0", "17"] {
-        let (ok, _, err) = gsart(&[
-            "fit",
-            "missing_dir_is_not_read",
-            "--restarts",
-            n,
-            "--out",
-            out.to_str().unwrap(),
-        ]);
-        assert!(!ok);
-        assert!(
-            err.starts_with("gsart: ") && err.contains("--restarts"),
-            "{err}"
-        );
-    }
+    fit_refuses("restarts", "--restarts", "0");
+    fit_refuses("restarts", "--restarts", "17");
 }
 
 #[test]
 fn key_frames_must_be_zero_or_at_least_two() {
-    let out = tmp("key_frames").join("r.json");
-    let (ok, _, err) = gsart(&[
-        "fit",
-        "missing_dir_is_not_read",
-        "--key-frames",
-        "1",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(!ok);
-    assert!(
-        err.starts_with("gsart: ") && err.contains("--key-frames"),
-        "{err}"
-    );
+    fit_refuses("key_frames", "--key-frames", "1");
 }
 
 /// A sequence longer than `--key-frames` is fitted on its key frames and the others

@@ -93,6 +93,11 @@ use crate::geom::se3::{from_row_major, rigid_inverse, to_row_major};
 use crate::io::gt::GroundTruth;
 
 impl FitResult {
+    /// Whether the fit used the occluded losses (`info.occlusion_used`), when recorded.
+    pub fn occlusion_used(&self) -> Option<bool> {
+        self.info.as_ref()?.get("occlusion_used")?.as_bool()
+    }
+
     /// Parse and validate a result file. `file` names the source in errors.
     /// Unknown keys are ignored (other tools write this format too).
     pub fn from_json(text: &str, file: &str) -> crate::Result<FitResult> {

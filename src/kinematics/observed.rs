@@ -192,8 +192,7 @@ pub fn polish_motions(
     gain: f64,
 ) {
     let by_part = points_by_part(points, labels, motions.first().map_or(0, Vec::len));
-    let mut dst = Vec::new();
-    let mut buf = Vec::new();
+    let mut bufs = (Vec::new(), Vec::new());
     for (t, frame) in motions.iter_mut().enumerate() {
         let Some(cloud) = frames.get(t).filter(|c| !c.is_empty()) else {
             continue;
@@ -202,17 +201,37 @@ pub fn polish_motions(
             continue;
         }
         let grid = Grid::new(cloud);
-        for (p, pose) in frame.iter_mut().enumerate() {
-            let pts = &by_part[p];
-            if pts.len() < 16 {
-                continue;
-            }
-            let start = *pose;
-            let mo = icp_pose(&grid, cloud, pts, &start, (rounds, keep), &mut dst);
-            let before = trimmed_fit(&grid, pts, &start, keep, &mut buf);
-            if trimmed_fit(&grid, pts, &mo, keep, &mut buf) < (1.0 - gain) * before {
-                *pose = mo;
-            }
+        polish_frame(
+            frame,
+            &by_part,
+            &grid,
+            cloud,
+            (rounds, keep, gain),
+            &mut bufs,
+        );
+    }
+}
+
+/// One frame of [`polish_motions`]: each part's motion in `frame` polished against
+/// `cloud` (`grid` its grid) with (rounds, kept fraction, gain) `settings`; `by_part`
+/// are the canonical points of each part ([`points_by_part`]), `bufs` scratch space.
+pub(crate) fn polish_frame(
+    frame: &mut [DMat4],
+    by_part: &[Vec<DVec3>],
+    grid: &Grid,
+    cloud: &[Vec3],
+    (rounds, keep, gain): (usize, f64, f64),
+    (dst, buf): &mut (Vec<DVec3>, Vec<f64>),
+) {
+    for (pose, pts) in frame.iter_mut().zip(by_part) {
+        if pts.len() < 16 {
+            continue;
+        }
+        let start = *pose;
+        let mo = icp_pose(grid, cloud, pts, &start, (rounds, keep), dst);
+        let before = trimmed_fit(grid, pts, &start, keep, buf);
+        if trimmed_fit(grid, pts, &mo, keep, buf) < (1.0 - gain) * before {
+            *pose = mo;
         }
     }
 }

@@ -55,13 +55,12 @@ pub struct Configuration {
 /// Fits the configuration of each of `frames` from `starts` (one per frame), for the
 /// articulated `model` (tree, joints and root motion, in the units of the points).
 /// `canonical` are the points of the model's canonical frame, `labels` their parts.
-/// The frames are taken by value: their points are sampled, then dropped.
 /// Progress is reported as `Stage::Track`; a cancel stops it.
 pub fn track(
     model: &FitResult,
     canonical: &[Vec3],
     labels: &[u32],
-    frames: Vec<Vec<Vec3>>,
+    frames: &[Vec<Vec3>],
     starts: &[Configuration],
     opts: &TrackOptions,
     progress: &mut dyn FnMut(&Progress) -> Control,
@@ -115,7 +114,9 @@ pub fn track(
         ..model.clone()
     };
     let (m, mut x) = model_from_result(&chain, true)?;
-    let points: Vec<Vec<Vec3>> = std::iter::once(canonical.to_vec()).chain(frames).collect();
+    let points: Vec<Vec<Vec3>> = std::iter::once(canonical.to_vec())
+        .chain(frames.iter().cloned())
+        .collect();
     let mut rng = StdRng::seed_from_u64(opts.seed);
     let data = build_data(&chain, &points, opts.sample, &mut rng);
     drop(points);
@@ -285,7 +286,7 @@ mod tests {
             iters: 150,
             ..Default::default()
         };
-        let got = track(&model, &pts, &labels, frames, &starts, &opts, &mut |_| {
+        let got = track(&model, &pts, &labels, &frames, &starts, &opts, &mut |_| {
             Control::Continue
         })
         .unwrap();
@@ -326,7 +327,7 @@ mod tests {
             &model,
             &pts,
             &labels,
-            frames.clone(),
+            &frames,
             std::slice::from_ref(&start),
             &TrackOptions::default(),
             &mut |_| Control::Continue,
@@ -342,7 +343,7 @@ mod tests {
             &model,
             &pts,
             &labels,
-            frames,
+            &frames,
             &[start],
             &TrackOptions::default(),
             &mut |_| Control::Cancel,
