@@ -19,6 +19,7 @@
 use glam::DMat4;
 use serde_json::json;
 
+use crate::fit::whole_motion::WholeMotion;
 use crate::io::gt::JointType;
 use crate::io::result::FitResult;
 use crate::io::sequence::Sequence;
@@ -140,6 +141,20 @@ pub fn apply(
     if edit.only_unlinks() {
         return unlink_only(old, edit);
     }
+    // A fit of an object that moves as a whole (`fit::whole_motion`) was made on the
+    // frames brought back by that motion; so is the edit, carried forward at the end.
+    let whole = WholeMotion::of_result(old);
+    let (brought_back, uncarried);
+    let (seq, old) = match &whole {
+        Some(w) => {
+            brought_back = w.bring_back(seq);
+            let mut o = old.clone();
+            w.uncarry(&mut o);
+            uncarried = o;
+            (&brought_back, &uncarried)
+        }
+        None => (seq, old),
+    };
     let (map, parts) = join_map(old.parts, groups)?;
     let root = match edit.root {
         Some(r) if r >= old.parts => {
@@ -306,6 +321,9 @@ pub fn apply(
     info.insert("unlinked".into(), serde_json::json!(still_unlinked));
     info.insert("notes".into(), serde_json::json!(notes));
     result.info = Some(serde_json::Value::Object(info));
+    if let Some(w) = &whole {
+        w.carry(&mut result);
+    }
     result.validate("edited result")?;
     Ok(FitOutput { result, kin, notes })
 }

@@ -657,6 +657,17 @@ pub fn finish(
 ) -> crate::Result<FitOutput> {
     use crate::io::result::ResultGaussian;
     let k = seq.frames.len();
+    // A Step-1 model of the frames brought back by the whole object's motion
+    // (`fit::whole_motion`): Steps 2–3 run on those frames, and the result is carried
+    // forward at the end.
+    let brought_back;
+    let seq = match &step1.whole {
+        Some(w) if w.motions.len() == k => {
+            brought_back = w.bring_back(seq);
+            &brought_back
+        }
+        _ => seq,
+    };
     if step1.labels.len() != k
         || step1.working.len() != k
         || step1.model.frames != k
@@ -867,6 +878,9 @@ pub fn finish(
             ));
         }
     }
+    if let Some(w) = &step1.whole {
+        notes.push(w.note(canonical));
+    }
     if step1.held_still > 0 {
         let why = if step1.occlusion_used {
             "the frames agree better with no motion than with theirs"
@@ -905,6 +919,10 @@ pub fn finish(
             unexplained,
             &kinematics_notes,
         ));
+    }
+    if let (Some(w), Some(o)) = (&step1.whole, info.as_object_mut()) {
+        o.insert("whole_motion".into(), w.to_json());
+        w.carry(&mut result);
     }
     result.info = Some(info);
     result.validate("result")?;

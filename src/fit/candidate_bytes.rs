@@ -13,10 +13,11 @@
 //! lengths and `usize` values as `u64`, booleans and option tags as one byte.
 
 use super::gaussians::GaussianModel;
+use super::whole_motion::WholeMotion;
 use super::{Step1Result, Timings};
 use crate::normalisation::Normalisation;
 use crate::{Error, Result};
-use glam::DVec3;
+use glam::{DMat4, DVec3};
 
 const MAGIC: &[u8; 4] = b"GSC1";
 
@@ -55,6 +56,16 @@ pub fn to_bytes(r: &Step1Result) -> Vec<u8> {
         w.usize(it);
     }
     w.option(r.segmenter.as_ref(), |w, g| w.model(g));
+    w.option(r.whole.as_ref(), |w, whole| {
+        w.usize(whole.motions.len());
+        for m in &whole.motions {
+            for v in m.to_cols_array() {
+                w.f64(v);
+            }
+        }
+        w.f64(whole.agree_still);
+        w.f64(whole.agree_moved);
+    });
     w.0
 }
 
@@ -93,6 +104,22 @@ pub fn from_bytes(bytes: &[u8]) -> Result<Step1Result> {
         per_candidate.push((r.usize()?, r.f64()?, r.usize()?));
     }
     let segmenter = r.option(|r| r.model())?;
+    let whole = r.option(|r| {
+        let n = r.len(128)?;
+        let mut motions = Vec::with_capacity(n);
+        for _ in 0..n {
+            let mut a = [0.0; 16];
+            for v in &mut a {
+                *v = r.f64()?;
+            }
+            motions.push(DMat4::from_cols_array(&a));
+        }
+        Ok(WholeMotion {
+            motions,
+            agree_still: r.f64()?,
+            agree_moved: r.f64()?,
+        })
+    })?;
     if r.at != bytes.len() {
         return Err(Error::input(
             SOURCE,
@@ -118,6 +145,7 @@ pub fn from_bytes(bytes: &[u8]) -> Result<Step1Result> {
             per_candidate,
         },
         segmenter,
+        whole,
     })
 }
 
@@ -133,6 +161,7 @@ fn encoded_size_hint(r: &Step1Result) -> usize {
         + lists(&r.working)
         + 16 * r.candidates.len()
         + 24 * r.timings.per_candidate.len()
+        + r.whole.as_ref().map_or(0, |w| 24 + 128 * w.motions.len())
 }
 
 struct Writer(Vec<u8>);
@@ -385,6 +414,17 @@ mod tests {
         assert_eq!(back.model.center[0][0].to_bits(), 0x3fff_ffff);
         assert_eq!(back.medial_init, Some(true));
         assert_eq!(back.timings, r.timings);
+        // The whole object's motion (`whole_motion`), when there is one.
+        r.whole = Some(WholeMotion {
+            motions: vec![DMat4::IDENTITY, DMat4::from_rotation_z(0.3)],
+            agree_still: 0.1,
+            agree_moved: f64::from_bits(3),
+        });
+        let bytes = to_bytes(&r);
+        let back = from_bytes(&bytes).expect("decodes");
+        assert_eq!(back.whole, r.whole);
+        assert_eq!(to_bytes(&back), bytes);
+        assert!(from_bytes(&bytes[..bytes.len() - 1]).is_err());
     }
 
     /// Anything but the whole encoding is an error, never a panic or a huge

@@ -18,6 +18,7 @@ pub mod rot6d;
 pub mod schedule;
 pub mod select;
 pub mod start_frame;
+pub mod whole_motion;
 
 pub use gaussians::GaussianModel;
 
@@ -67,4 +68,7 @@ pub struct Step1Result {
     /// `select::SEGMENT_ITERS`). `model` gives the poses, `labels` and the canonical
     /// frame's labels.
     pub segmenter: Option<GaussianModel>,
+    /// On occluded input, the whole object's motion when it moves as a whole
+    /// (`whole_motion`): the model is of the frames brought back by it.
+    pub whole: Option<whole_motion::WholeMotion>,
 }

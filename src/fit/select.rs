@@ -12,6 +12,7 @@ use super::flow::OtFlow;
 use super::hold_still;
 use super::schedule::Schedule;
 use super::start_frame::{self, FrameOrder};
+use super::whole_motion::{self, WholeMotion};
 use super::{Step1Result, Timings};
 use crate::io::sequence::Sequence;
 use crate::normalisation::Normalisation;
@@ -165,6 +166,9 @@ pub struct Prepared {
     pub order: FrameOrder,
     pub sched: Schedule,
     pub flow: Option<FlowField>,
+    /// On occluded input, the whole object's motion (`whole_motion`) when it moves as
+    /// a whole: `data` holds the frames brought back by it.
+    pub whole: Option<WholeMotion>,
 }
 
 /// Whether the (non-learned) flow loss is used on full (non-occluded) input.
@@ -215,7 +219,7 @@ pub fn will_be_occluded(seq: &Sequence, opts: &FitOptions) -> Result<bool> {
 
 pub fn prepare(seq: &Sequence, opts: &FitOptions) -> Result<Prepared> {
     validate(seq)?;
-    let (norm, (clouds, working)) = normalised_working(seq, opts);
+    let (norm, (mut clouds, working)) = normalised_working(seq, opts);
     let sizes: Vec<usize> = seq.frames.iter().map(|f| f.points.len()).collect();
     let occluded = occlusion_used(seq, opts, &clouds);
     let mut sched = Schedule::preset(opts.quality, is_small(seq, opts.working_size));
@@ -229,6 +233,11 @@ pub fn prepare(seq: &Sequence, opts: &FitOptions) -> Result<Prepared> {
     } else {
         FrameOrder::identity(sizes.len())
     };
+    let whole = if occluded {
+        whole_motion::bring_back_clouds(&mut clouds, order.start(), &norm)
+    } else {
+        None
+    };
     let mut data = Data::new(order.permute(clouds));
     data.track_from = order.track_from();
     let flow = (USE_FLOW && !occluded)
@@ -241,6 +250,7 @@ pub fn prepare(seq: &Sequence, opts: &FitOptions) -> Result<Prepared> {
         order,
         sched,
         flow,
+        whole,
     })
 }
 
@@ -437,10 +447,13 @@ fn fit_once(
     // Snapshots go out in input units and input frame numbers.
     let start = prep.order.start();
     let mut report = |p: &Progress| match &p.snapshot {
-        Some(s) if !prep.norm.is_identity() || start != 0 => {
+        Some(s) if !prep.norm.is_identity() || start != 0 || prep.whole.is_some() => {
             let mut s = s.clone();
             prep.norm.snapshot_to_input(&mut s);
             s.frame = prep.order.order.get(s.frame).copied().unwrap_or(s.frame);
+            if let Some(w) = &prep.whole {
+                w.carry_snapshot(&mut s);
+            }
             cb(&Progress {
                 snapshot: Some(s),
                 ..p.clone()
@@ -515,6 +528,7 @@ pub fn candidate_result(
         medial_init: None,
         held_still: 0,
         segmenter: None,
+        whole: prep.whole.clone(),
         timings: Timings {
             total_s: secs,
             per_candidate: vec![(m, secs, iterations)],
