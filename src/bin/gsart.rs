@@ -138,6 +138,10 @@ mod cli {
             /// surface (flying pixels).
             #[arg(long, default_value_t = 0.0)]
             outliers: f64,
+            /// Turn the whole object this many degrees a frame about the vertical axis
+            /// through its centre, as on a turntable (the poses turn with it).
+            #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+            turn: f64,
             #[arg(long, default_value_t = 0)]
             seed: u64,
         },
@@ -284,6 +288,7 @@ mod cli {
                 occluded,
                 noise,
                 outliers,
+                turn,
                 seed,
             } => {
                 // The settings every object gets; `points` defaults per object.
@@ -293,6 +298,7 @@ mod cli {
                     occluded,
                     noise,
                     outliers,
+                    turn,
                     seed,
                     ..Default::default()
                 };

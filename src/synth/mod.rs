@@ -142,6 +142,10 @@ pub struct SynthOptions {
     /// thrown 5–15 % of the object's longest side off the surface in a random
     /// direction, keeping their part's label.
     pub outliers: f64,
+    /// The whole object turns this many degrees a frame about the vertical (z) axis
+    /// through its centre, as on a turntable (|turn| ≤ [`MAX_TURN`]; 0: still). The
+    /// ground-truth poses turn with it; frame 0 and the held-out poses do not.
+    pub turn: f64,
     pub seed: u64,
 }
 
@@ -156,6 +160,7 @@ impl SynthOptions {
             occluded: false,
             noise: 0.0,
             outliers: 0.0,
+            turn: 0.0,
             seed: 0,
         }
     }
@@ -192,6 +197,8 @@ pub struct SynthInfo {
     /// (`SynthOptions::noise`, `outliers`).
     pub noise: f64,
     pub outliers: f64,
+    /// `SynthOptions::turn`.
+    pub turn: f64,
 }
 
 /// A generated sequence: observed frames (with part labels), ground truth, and
@@ -211,6 +218,9 @@ pub const MAX_FRAMES: usize = 1000;
 pub const MAX_NOISE: f64 = 0.1;
 /// Largest share of flying pixels.
 pub const MAX_OUTLIERS: f64 = 0.5;
+
+/// Largest turn a frame (degrees, `SynthOptions::turn`).
+pub const MAX_TURN: f64 = 30.0;
 /// How far a flying pixel is thrown off the surface, as fractions of the longest side.
 const OUTLIER_REACH: (f64, f64) = (0.05, 0.15);
 
@@ -335,6 +345,12 @@ fn check(opts: &SynthOptions) -> crate::Result<()> {
             opts.outliers
         ));
     }
+    if !(-MAX_TURN..=MAX_TURN).contains(&opts.turn) {
+        return bad(format!(
+            "the turn must be between -{MAX_TURN} and {MAX_TURN} degrees a frame, got {}",
+            opts.turn
+        ));
+    }
     Ok(())
 }
 
@@ -445,9 +461,16 @@ pub fn generate(opts: &SynthOptions) -> crate::Result<SynthOutput> {
     let s = (1.0 - 1e-6) / extent;
     let c = (lo + hi) * 0.5;
 
+    // The turntable (`SynthOptions::turn`) turns frame t about z through the centre.
+    let turned = |t: usize| DMat4::from_rotation_z((opts.turn * t as f64).to_radians());
     let norm_poses: Vec<Vec<DMat4>> = poses
         .iter()
-        .map(|f| f.iter().map(|m| normalise_pose(m, s, c)).collect())
+        .enumerate()
+        .map(|(t, f)| {
+            f.iter()
+                .map(|m| turned(t) * normalise_pose(m, s, c))
+                .collect()
+        })
         .collect();
     let norm_held: Vec<Vec<DMat4>> = held_poses
         .iter()
@@ -497,6 +520,15 @@ pub fn generate(opts: &SynthOptions) -> crate::Result<SynthOutput> {
         .zip(&frame_names)
         .map(|((pts, labels), name)| to_frame(name.clone(), &pts, labels, s, c))
         .collect();
+    if opts.turn != 0.0 {
+        // Before the occlusion: the camera sees the object turn.
+        for (t, frame) in frames.iter_mut().enumerate() {
+            let w = turned(t);
+            for p in &mut frame.points {
+                *p = w.transform_point3(p.as_dvec3()).as_vec3();
+            }
+        }
+    }
     let heldout: Vec<Frame> = held_clouds
         .into_iter()
         .zip(&held_names)
@@ -573,6 +605,7 @@ pub fn generate(opts: &SynthOptions) -> crate::Result<SynthOutput> {
             occlusion_method: method,
             noise: opts.noise,
             outliers: opts.outliers,
+            turn: opts.turn,
         },
     })
 }
@@ -606,7 +639,15 @@ pub fn gt_json(out: &SynthOutput) -> String {
         json!({"scale": info.scale, "center": v3(info.center),
                "note": "x = scale * (x_design - center); all coordinates, poses and prismatic states are in these normalised units"}),
     );
-    map.insert("base_motion".into(), json!("none"));
+    map.insert(
+        "base_motion".into(),
+        if info.turn == 0.0 {
+            json!("none")
+        } else {
+            json!({"type": "turntable", "degrees_per_frame": info.turn, "axis": [0.0, 0.0, 1.0],
+                   "note": "frame t is turned by degrees_per_frame · t about the axis through the origin; the poses include it, frame 0 and the held-out poses are not turned"})
+        },
+    );
     map.insert("random_rotation".into(), json!(false));
     let counts = |f: &Frame| {
         let mut c = vec![0usize; np];
