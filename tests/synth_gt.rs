@@ -575,3 +575,41 @@ fn sensor_noise_and_flying_pixels_perturb_the_frames_only() {
         assert!(e.is_err(), "noise {noise}, outliers {outliers} accepted");
     }
 }
+
+/// `SynthOptions::turn`: frame t is the still object's frame turned 4t° about z, points
+/// and poses alike (frame 0 and the held-out poses unturned), recorded in `gt.json`.
+#[test]
+fn a_turntable_turns_every_frame_its_points_and_poses() {
+    let still = gen(&opts(ObjectKind::Quadruped, 3));
+    let turned = gen(&SynthOptions {
+        turn: 4.0,
+        ..opts(ObjectKind::Quadruped, 3)
+    });
+    for (t, (a, b)) in still
+        .sequence
+        .frames
+        .iter()
+        .zip(&turned.sequence.frames)
+        .enumerate()
+    {
+        let w = DMat4::from_rotation_z((4.0 * t as f64).to_radians());
+        assert_eq!(a.points.len(), b.points.len());
+        for (p, q) in a.points.iter().zip(&b.points) {
+            assert!(w.transform_point3(p.as_dvec3()).distance(q.as_dvec3()) < 1e-5);
+        }
+        assert_eq!(a.labels, b.labels);
+        for (p, q) in still.gt.poses[t].iter().zip(&turned.gt.poses[t]) {
+            assert!((w * *p).abs_diff_eq(*q, 1e-12), "frame {t}");
+        }
+    }
+    assert_eq!(still.gt.heldout_poses, turned.gt.heldout_poses);
+    let json: serde_json::Value = serde_json::from_str(&gt_json(&turned)).unwrap();
+    assert_eq!(json["base_motion"]["degrees_per_frame"], 4.0);
+    let json: serde_json::Value = serde_json::from_str(&gt_json(&still)).unwrap();
+    assert_eq!(json["base_motion"], "none");
+    assert!(generate(&SynthOptions {
+        turn: 31.0,
+        ..opts(ObjectKind::Laptop, 0)
+    })
+    .is_err());
+}

@@ -2,7 +2,8 @@
 //! procedural quadruped on a turntable (`SynthOptions::turn`), 3° a frame, seen by one
 //! camera. Fitted on the frames brought back by the registered motion, the result must
 //! carry that motion and explain the frames: without the registration the occluded path
-//! holds the body still, and this fit's reconstruction error was 6.1 (RI 0.65).
+//! holds the body still, and this fit gave a reconstruction error of 3.67 (RI 0.674)
+//! against 1.47 (RI 0.884) with it.
 
 use glam::DMat4;
 use gsart::fit::whole_motion::WholeMotion;
