@@ -662,11 +662,17 @@ pub fn finish(
     // forward at the end.
     let brought_back;
     let seq = match &step1.whole {
-        Some(w) if w.motions.len() == k => {
+        Some(w) if w.motions.len() != k => {
+            return Err(crate::Error::Sequence(format!(
+                "the Step-1 model's whole-object motion has {} frames but the sequence {k}",
+                w.motions.len()
+            )))
+        }
+        Some(w) => {
             brought_back = w.bring_back(seq);
             &brought_back
         }
-        _ => seq,
+        None => seq,
     };
     if step1.labels.len() != k
         || step1.working.len() != k
@@ -879,7 +885,7 @@ pub fn finish(
         }
     }
     if let Some(w) = &step1.whole {
-        notes.push(w.note(canonical));
+        notes.push(w.note(canonical, step1.norm.center));
     }
     if step1.held_still > 0 {
         let why = if step1.occlusion_used {

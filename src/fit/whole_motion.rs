@@ -251,18 +251,20 @@ impl WholeMotion {
         })
     }
 
-    /// The note a result carries.
-    pub fn note(&self, canonical: usize) -> String {
+    /// The note a result carries; `centre` is a point of the object (input units),
+    /// whose displacement is reported.
+    pub fn note(&self, canonical: usize, centre: DVec3) -> String {
         let (turn, shift) = self
             .motions
             .iter()
             .map(|w| {
-                let (_, q, t) = w.to_scale_rotation_translation();
-                (q.to_axis_angle().1.to_degrees(), t.length())
+                let (_, q, _) = w.to_scale_rotation_translation();
+                let moved = w.transform_point3(centre).distance(centre);
+                (q.to_axis_angle().1.to_degrees(), moved)
             })
             .fold((0.0f64, 0.0f64), |(a, b), (x, y)| (a.max(x), b.max(y)));
         format!(
-            "the object moves as a whole (registered to frame {canonical}, up to {turn:.0}° and {shift:.3} away; frames agree with it {:.0} % against {:.0} % without): Steps 1–3 fitted the frames brought back by that motion, and the result carries it",
+            "the object moves as a whole (registered to frame {canonical}: turned up to {turn:.0}°, its centre moved up to {shift:.3}; {:.0} % of a frame's points lie near the canonical frame's with that motion, {:.0} % without): Steps 1–3 fitted the frames brought back by it, and the result carries it",
             100.0 * self.agree_moved,
             100.0 * self.agree_still
         )
