@@ -3,11 +3,11 @@
 //! root motion and joint states, started between its neighbouring key frames). Step 1's
 //! time grows with the number of frames; the tracking costs a fraction of it per frame.
 
-use glam::{DMat3, DMat4, DQuat, DVec3, Vec3};
+use glam::{DMat4, DQuat, Vec3};
 
 use crate::geom::knn::Grid;
 use crate::geom::se3::{from_row_major, to_row_major};
-use crate::io::result::FitResult;
+use crate::io::result::{moved_placement, FitResult};
 use crate::io::sequence::Sequence;
 use crate::kinematics::observed::{
     points_by_part, polish_frame, POLISH_GAIN, POLISH_KEEP, POLISH_ROUNDS,
@@ -265,22 +265,17 @@ pub fn extend(
             .map(|f| f.iter().map(from_row_major).collect())
             .collect();
         for (g, kg) in gs.iter_mut().zip(kg) {
-            let r_c = DMat3::from_cols_array(&kg.rotation[c_key]).transpose();
-            let mu_c = DVec3::from_array(kg.center[c_key]);
             let (mut rot, mut cen) = (Vec::with_capacity(k), Vec::with_capacity(k));
             for t in 0..k {
-                match source(t) {
-                    Source::Key(i) => {
-                        rot.push(kg.rotation[i]);
-                        cen.push(kg.center[i]);
-                    }
+                let (r, m) = match source(t) {
+                    Source::Key(i) => (kg.rotation[i], kg.center[i]),
                     Source::Tracked(_) => {
                         let p = poses[t][g.part] * poses[c][g.part].inverse();
-                        let r = DMat3::from_mat4(p) * r_c;
-                        rot.push(r.transpose().to_cols_array());
-                        cen.push(p.transform_point3(mu_c).to_array());
+                        moved_placement(&p, &kg.rotation[c_key], &kg.center[c_key])
                     }
-                }
+                };
+                rot.push(r);
+                cen.push(m);
             }
             g.rotation = rot;
             g.center = cen;
@@ -376,6 +371,7 @@ fn median(v: &mut [f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::DVec3;
 
     #[test]
     fn key_frames_spread_evenly_with_both_ends() {

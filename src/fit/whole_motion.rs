@@ -20,8 +20,8 @@ use glam::{DMat3, DMat4, DVec3, Vec3};
 
 use super::pose_init::trimmed_icp;
 use crate::geom::knn::{point_spacing, Grid};
-use crate::geom::se3::{from_row_major, to_row_major};
-use crate::io::result::FitResult;
+use crate::geom::se3::{from_row_major, rigid, to_row_major};
+use crate::io::result::{moved_placement, FitResult};
 use crate::io::sequence::Sequence;
 use crate::normalisation::Normalisation;
 
@@ -69,10 +69,6 @@ pub struct Registration {
 fn sample(c: &[Vec3]) -> Vec<DVec3> {
     let step = c.len().div_ceil(SAMPLE).max(1);
     c.iter().step_by(step).map(|p| p.as_dvec3()).collect()
-}
-
-fn rigid((r, t): (DMat3, DVec3)) -> DMat4 {
-    DMat4::from_mat3_translation(r, t)
 }
 
 /// Registers every frame of `clouds` to frame `c`: the frames after `c` in order, then
@@ -126,7 +122,7 @@ pub fn estimate(clouds: &[Vec<Vec3>], c: usize) -> Option<Registration> {
     let agree_still = agreement(&vec![still; k]);
     let agree_moved = agreement(&back);
     Some(Registration {
-        back: back.into_iter().map(rigid).collect(),
+        back: back.into_iter().map(|(r, t)| rigid(r, t)).collect(),
         agree_still,
         agree_moved,
     })
@@ -202,10 +198,7 @@ impl WholeMotion {
         }
         for g in r.gaussians.iter_mut().flatten() {
             for ((rot, cen), w) in g.rotation.iter_mut().zip(&mut g.center).zip(&w) {
-                // Stored row-major (`DMat3::to_cols_array` of the transpose).
-                let m = DMat3::from_mat4(*w) * DMat3::from_cols_array(rot).transpose();
-                *rot = m.transpose().to_cols_array();
-                *cen = w.transform_point3(DVec3::from_array(*cen)).to_array();
+                (*rot, *cen) = moved_placement(w, rot, cen);
             }
         }
     }
@@ -216,18 +209,15 @@ impl WholeMotion {
         let Some(w) = self.motions.get(snap.frame) else {
             return;
         };
-        let r = DMat3::from_mat4(*w);
-        for c in snap.centers.chunks_exact_mut(3) {
-            let p = w.transform_point3(DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64));
-            c.copy_from_slice(&p.as_vec3().to_array());
-        }
-        for m in snap.rotations.chunks_exact_mut(9) {
-            // Row-major.
-            let a = DMat3::from_cols_array(&std::array::from_fn(|i| m[i] as f64)).transpose();
-            let b = (r * a).transpose().to_cols_array();
-            for (x, y) in m.iter_mut().zip(b) {
-                *x = y as f32;
-            }
+        for (c, m) in snap
+            .centers
+            .chunks_exact_mut(3)
+            .zip(snap.rotations.chunks_exact_mut(9))
+        {
+            let rot = std::array::from_fn(|i| m[i] as f64);
+            let (r, p) = moved_placement(w, &rot, &[c[0] as f64, c[1] as f64, c[2] as f64]);
+            m.iter_mut().zip(r).for_each(|(x, y)| *x = y as f32);
+            c.iter_mut().zip(p).for_each(|(x, y)| *x = y as f32);
         }
     }
 

@@ -3,6 +3,7 @@
 //! Readers accept any file with the required keys and ignore keys they do not know
 //! (other tools write it too). Matrices are 16 numbers, row-major.
 
+use glam::{DMat3, DMat4, DVec3};
 use serde::{Deserialize, Serialize};
 
 use crate::io::gt::JointType;
@@ -21,6 +22,14 @@ pub struct ResultGaussian {
     pub rotation: Vec<[f64; 9]>,
     /// Per-frame centre.
     pub center: Vec<[f64; 3]>,
+}
+
+/// A Gaussian's placement in one frame (`ResultGaussian::rotation`, row-major, and
+/// `center`) moved by the rigid motion `by`.
+pub fn moved_placement(by: &DMat4, rotation: &[f64; 9], center: &[f64; 3]) -> ([f64; 9], [f64; 3]) {
+    let r = DMat3::from_mat4(*by) * DMat3::from_cols_array(rotation).transpose();
+    let c = by.transform_point3(DVec3::from_array(*center));
+    (r.transpose().to_cols_array(), c.to_array())
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -86,8 +95,6 @@ pub struct FitResult {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub info: Option<serde_json::Value>,
 }
-
-use glam::DMat4;
 
 use crate::geom::se3::{from_row_major, rigid_inverse, to_row_major};
 use crate::io::gt::GroundTruth;
