@@ -2,7 +2,8 @@
 # Installs everything the project needs, skipping what is already there (idempotent):
 # the wasm32 Rust target, wasm-bindgen-cli pinned to the crate's version, Debian's
 # Chromium + ChromeDriver, the npm packages (playwright-core, binaryen/wasm-opt), and
-# yourdfpy from PyPI (the URDF export is checked with a standard parser).
+# yourdfpy and numpy from PyPI (the URDF export is checked with a standard parser, the
+# NumPy frame reader against files numpy itself writes).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -31,8 +32,8 @@ if [ ! -d node_modules/playwright-core ] || [ ! -d node_modules/binaryen ] || [ 
   echo "setup: npm packages"
   if [ -f package-lock.json ]; then npm ci --no-audit --no-fund; else npm install --no-audit --no-fund; fi
 fi
-if ! python3 -c "import yourdfpy" >/dev/null 2>&1; then
-  echo "setup: pip install yourdfpy (a standard URDF parser for the URDF export test)"
-  python3 -m pip install --quiet yourdfpy
+if ! python3 -c "import yourdfpy, numpy" >/dev/null 2>&1; then
+  echo "setup: pip install yourdfpy numpy (a standard URDF parser, and numpy's own files, for the tests)"
+  python3 -m pip install --quiet yourdfpy numpy
 fi
 echo "setup: ready"

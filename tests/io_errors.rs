@@ -461,11 +461,15 @@ fn path_errors_name_the_path() {
         matches!(e, Error::Io { .. }) && e.to_string().contains("nope.ply"),
         "{e}"
     );
-    // A folder without PLY files.
+    // A folder without frame files (a JSON is none).
     let empty = dir.join("empty");
     std::fs::create_dir_all(&empty).unwrap();
+    std::fs::write(empty.join("gt.json"), b"{}").unwrap();
     let e = Sequence::from_dir(&empty).unwrap_err().to_string();
-    assert!(e.contains("no .ply files") && e.contains("empty"), "{e}");
+    assert!(
+        e.contains("no frame files (.ply, .pcd") && e.contains("empty"),
+        "{e}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -521,5 +525,5 @@ fn browser_files_fail_individually() {
 #[test]
 fn read_ply_alone_reports_structure_errors() {
     let e = read_ply(b"PK\x03\x04", "z.zip").unwrap_err().to_string();
-    assert_eq!(e, "z.zip: this looks like a ZIP archive, not a PLY file (unzip it and load the .ply files inside)");
+    assert_eq!(e, "z.zip: this looks like a ZIP archive, not a PLY file (unzip it and load the frames inside; a NumPy archive loads named .npz)");
 }

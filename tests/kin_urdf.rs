@@ -6,6 +6,7 @@
 //! centre of mass and inertia as trimesh computes them are the URDF's `<inertial>`.
 
 mod kin_common;
+mod python_common;
 
 use std::collections::HashMap;
 
@@ -261,18 +262,7 @@ struct MeshRead {
 
 #[test]
 fn urdf_loads_in_yourdfpy_with_matching_fk() {
-    let ok = std::process::Command::new("python3")
-        .args(["-c", "import yourdfpy"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if !ok {
-        // `npm test` installs it, so in CI a missing parser is a failure, not a skip.
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "yourdfpy is not installed (scripts/setup.sh installs it)"
-        );
-        eprintln!("skip: python3 with yourdfpy not available (pip install yourdfpy)");
+    if !python_common::python_has("yourdfpy") {
         return;
     }
     let rs = results();

@@ -30,7 +30,7 @@ fn written_folder_reads_back() {
         let dir = temp_dir(if ascii { "ascii" } else { "bin" });
         write_sequence_dir_with(&out, &dir, ascii).unwrap();
 
-        let names: Vec<String> = Sequence::ply_files_in(&dir)
+        let names: Vec<String> = Sequence::frame_files_in(&dir)
             .unwrap()
             .iter()
             .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())

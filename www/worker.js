@@ -40,8 +40,9 @@ async function handle(msg) {
   const { id } = msg;
   switch (msg.type) {
     case 'parse': {
-      // One entry per file (natural order) so one bad file never hides the others.
-      const out = gsart.parse_plys(msg.files.map((f) => f.name), msg.files.map((f) => new Uint8Array(f.bytes)));
+      // One entry per frame (natural order; a NumPy stack gives several) and one per bad
+      // file, so one bad file never hides the others.
+      const out = gsart.parse_frames(msg.files.map((f) => f.name), msg.files.map((f) => new Uint8Array(f.bytes)));
       for (const r of out) {
         if (r.error) self.postMessage({ id, type: 'parsed', name: r.name, error: r.error });
         else self.postMessage({ id, type: 'parsed', name: r.name, points: r.points, labels: r.labels ?? null },

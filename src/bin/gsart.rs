@@ -425,7 +425,7 @@ mod cli {
                 if p.is_dir() {
                     return Err(Error::input(
                         p.display().to_string(),
-                        "give either one sequence folder or a list of PLY files",
+                        "give either one sequence folder or a list of frame files",
                     ));
                 }
             }
@@ -787,10 +787,7 @@ mod cli {
             );
             if let Some(dir) = self.ply_out {
                 for (k, frame) in seq.frames.iter().enumerate() {
-                    let stem = Path::new(&frame.name)
-                        .file_stem()
-                        .map(|s| s.to_string_lossy().to_string())
-                        .unwrap_or_else(|| format!("frame_{k:03}"));
+                    let stem = gsart::io::cloud_file::frame_stem(&frame.name);
                     let path = dir.join(format!("{stem}_parts.ply"));
                     let mut buf = Vec::new();
                     gsart::io::ply::write_ply(

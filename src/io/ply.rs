@@ -181,7 +181,15 @@ fn plural(n: u64, one: &str, many: &str) -> String {
 /// Names the format when the bytes are clearly something other than a PLY file.
 fn sniff_other_format(start: &[u8]) -> Option<&'static str> {
     if start.starts_with(b"PK\x03\x04") || start.starts_with(b"PK\x05\x06") {
-        return Some("this looks like a ZIP archive, not a PLY file (unzip it and load the .ply files inside)");
+        return Some("this looks like a ZIP archive, not a PLY file (unzip it and load the frames inside; a NumPy archive loads named .npz)");
+    }
+    if start.starts_with(super::npy::MAGIC) {
+        return Some(
+            "this looks like a NumPy array, not a PLY file (name it .npy to load it as one)",
+        );
+    }
+    if super::pcd::looks_like_pcd(start) {
+        return Some("this looks like a PCD file, not a PLY file (name it .pcd to load it as one)");
     }
     if start.starts_with(&[0x1f, 0x8b]) {
         return Some(
@@ -198,7 +206,9 @@ fn sniff_other_format(start: &[u8]) -> Option<&'static str> {
         "v ", "vn ", "vt ", "f ", "o ", "g ", "mtllib ", "usemtl ", "#",
     ];
     if obj_prefixes.iter().any(|p| first.starts_with(p)) {
-        return Some("this looks like a Wavefront OBJ file, not a PLY file (convert it to PLY)");
+        return Some(
+            "this looks like a Wavefront OBJ file, not a PLY file (name it .obj to load it as one)",
+        );
     }
     if first.starts_with("solid") {
         return Some("this looks like an STL file, not a PLY file (convert it to PLY)");

@@ -15,7 +15,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::geom::fps::farthest_point_sampling;
-use crate::io::ply::{read_ply, read_ply_from, sample_mesh, validate_points, PlyCloud};
+use crate::io::cloud_file::{frame_name, read_clouds, CloudFormat, FRAME_EXTENSIONS};
+use crate::io::ply::{read_ply_from, sample_mesh, validate_points, PlyCloud};
 
 /// One observed point cloud.
 #[derive(Debug, Clone, Default)]
@@ -205,18 +206,86 @@ impl Frame {
         })
     }
 
-    /// Parses and validates one frame from bytes.
+    /// Parses and validates one frame from bytes; a file of several frames (a NumPy
+    /// stack) is an error here, see [`Frame::all_from_bytes`].
     pub fn from_bytes(name: &str, bytes: &[u8], mesh_samples: usize, seed: u64) -> Result<Frame> {
-        let cloud = read_ply(bytes, name)?;
-        Frame::from_cloud(name, name, cloud, mesh_samples, seed)
+        let mut frames = Frame::all_from_bytes(name, bytes, mesh_samples, seed)?;
+        if frames.len() != 1 {
+            return Err(Error::input(
+                name,
+                format!("holds {} frames where one was expected", frames.len()),
+            ));
+        }
+        Ok(frames.remove(0))
     }
 
-    /// Streams and validates one frame from a file; errors name the path.
-    pub fn from_path(path: &Path, mesh_samples: usize, seed: u64) -> Result<Frame> {
+    /// Parses and validates every frame a file holds (one for a PLY, PCD, OBJ or text
+    /// table; a NumPy file may hold several, named `name[k]`), in time order. Frame k
+    /// of the file samples a mesh with `seed` mixed with k.
+    pub fn all_from_bytes(
+        name: &str,
+        bytes: &[u8],
+        mesh_samples: usize,
+        seed: u64,
+    ) -> Result<Vec<Frame>> {
+        Frame::all_from_clouds(name, name, read_clouds(name, bytes)?, mesh_samples, seed)
+    }
+
+    fn all_from_clouds(
+        name: &str,
+        file: &str,
+        clouds: Vec<PlyCloud>,
+        mesh_samples: usize,
+        seed: u64,
+    ) -> Result<Vec<Frame>> {
+        let count = clouds.len();
+        if count == 0 {
+            return Err(Error::input(file, "holds no frames"));
+        }
+        clouds
+            .into_iter()
+            .enumerate()
+            .map(|(k, cloud)| {
+                let seed = if count == 1 {
+                    seed
+                } else {
+                    frame_seed(seed, k)
+                };
+                let shown = frame_name(file, k, count);
+                Frame::from_cloud(
+                    &frame_name(name, k, count),
+                    &shown,
+                    cloud,
+                    mesh_samples,
+                    seed,
+                )
+            })
+            .collect()
+    }
+
+    /// Reads and validates every frame of a file (a PLY is streamed; the others are
+    /// read whole); errors name the path.
+    pub fn all_from_path(path: &Path, mesh_samples: usize, seed: u64) -> Result<Vec<Frame>> {
         let shown = path.display().to_string();
-        let f = std::fs::File::open(path).map_err(|e| Error::io(&shown, e))?;
-        let cloud = read_ply_from(f, &shown)?;
-        Frame::from_cloud(&display_name(path), &shown, cloud, mesh_samples, seed)
+        let name = display_name(path);
+        let by_extension = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .and_then(CloudFormat::of_extension);
+        if by_extension == Some(CloudFormat::Ply) {
+            let f = std::fs::File::open(path).map_err(|e| Error::io(&shown, e))?;
+            let cloud = read_ply_from(f, &shown)?;
+            return Ok(vec![Frame::from_cloud(
+                &name,
+                &shown,
+                cloud,
+                mesh_samples,
+                seed,
+            )?]);
+        }
+        let bytes = std::fs::read(path).map_err(|e| Error::io(&shown, e))?;
+        let clouds = read_clouds(&shown, &bytes)?;
+        Frame::all_from_clouds(&name, &shown, clouds, mesh_samples, seed)
     }
 
     /// The working subset of this frame and the kept indices (ascending).
@@ -281,8 +350,9 @@ impl Sequence {
         Ok(Sequence { frames })
     }
 
-    /// Loads PLY files in natural filename order (`f2.ply` before `f10.ply`),
-    /// streaming each file; meshes are sampled with [`LoadOptions::default`].
+    /// Loads frame files in natural filename order (`f2.ply` before `f10.ply`; any
+    /// format of [`FRAME_EXTENSIONS`], a NumPy file giving all its frames in turn),
+    /// streaming PLY files; meshes are sampled with [`LoadOptions::default`].
     pub fn from_files(paths: &[PathBuf]) -> Result<Sequence> {
         Sequence::from_files_with(paths, LoadOptions::default())
     }
@@ -291,50 +361,66 @@ impl Sequence {
     pub fn from_files_with(paths: &[PathBuf], opts: LoadOptions) -> Result<Sequence> {
         let mut paths = paths.to_vec();
         sort_paths(&mut paths);
-        let frames = paths
-            .iter()
-            .enumerate()
-            .map(|(k, p)| Frame::from_path(p, opts.mesh_samples, frame_seed(opts.seed, k)))
-            .collect::<Result<Vec<_>>>()?;
+        let mut frames = Vec::new();
+        for (k, p) in paths.iter().enumerate() {
+            frames.extend(Frame::all_from_path(
+                p,
+                opts.mesh_samples,
+                frame_seed(opts.seed, k),
+            )?);
+        }
         Sequence::from_frames(frames)
     }
 
-    /// Every `*.ply` file directly in `dir` (not `heldout/`, not other files), in
-    /// natural order.
-    pub fn ply_files_in(dir: &Path) -> Result<Vec<PathBuf>> {
+    /// The frame files directly in `dir` (not `heldout/`), in natural order: the
+    /// files of the first of [`FRAME_EXTENSIONS`] the folder has (PLY before the
+    /// others), so one format makes the sequence and notes beside it are no frames.
+    pub fn frame_files_in(dir: &Path) -> Result<Vec<PathBuf>> {
         let shown = dir.display().to_string();
         let entries = std::fs::read_dir(dir).map_err(|e| Error::io(&shown, e))?;
-        let mut paths = Vec::new();
+        let mut by_ext: Vec<Vec<PathBuf>> = vec![Vec::new(); FRAME_EXTENSIONS.len()];
         for entry in entries {
             let entry = entry.map_err(|e| Error::io(&shown, e))?;
             let path = entry.path();
-            let is_ply = path
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
-            if is_ply && path.is_file() {
-                paths.push(path);
+            let rank = path.extension().and_then(|e| e.to_str()).and_then(|e| {
+                FRAME_EXTENSIONS
+                    .iter()
+                    .position(|x| x.eq_ignore_ascii_case(e))
+            });
+            let hidden = path
+                .file_name()
+                .is_some_and(|n| n.to_string_lossy().starts_with('.'));
+            if let Some(r) = rank.filter(|_| !hidden && path.is_file()) {
+                by_ext[r].push(path);
             }
         }
-        if paths.is_empty() {
-            return Err(Error::input(shown, "the folder contains no .ply files"));
-        }
+        let Some(mut paths) = by_ext.into_iter().find(|p| !p.is_empty()) else {
+            return Err(Error::input(
+                shown,
+                format!(
+                    "the folder contains no frame files (.{})",
+                    FRAME_EXTENSIONS.join(", .")
+                ),
+            ));
+        };
         sort_paths(&mut paths);
         Ok(paths)
     }
 
-    /// Loads every `*.ply` file of a folder (see [`Sequence::ply_files_in`]).
+    /// Loads the frame files of a folder (see [`Sequence::frame_files_in`]).
     pub fn from_dir(dir: &Path) -> Result<Sequence> {
         Sequence::from_dir_with(dir, LoadOptions::default())
     }
 
     /// [`Sequence::from_dir`] with explicit options.
     pub fn from_dir_with(dir: &Path, opts: LoadOptions) -> Result<Sequence> {
-        Sequence::from_files_with(&Sequence::ply_files_in(dir)?, opts)
+        Sequence::from_files_with(&Sequence::frame_files_in(dir)?, opts)
     }
 
     /// Parses named buffers (the browser's dropped files) independently: each gets its
-    /// own result so one bad file does not discard the others. Returned in natural
-    /// name order; assemble the good ones with [`Sequence::from_loaded`].
+    /// own result so one bad file does not discard the others (a file of several
+    /// frames gives one entry a frame, `walk.npy[0]`, …). Returned in natural name
+    /// order; assemble the good ones with [`Sequence::from_loaded`].
     pub fn from_named_bytes(
         files: Vec<(String, Vec<u8>)>,
         opts: LoadOptions,
@@ -344,10 +430,19 @@ impl Sequence {
         files
             .into_iter()
             .enumerate()
-            .map(|(k, (name, bytes))| {
-                let frame =
-                    Frame::from_bytes(&name, &bytes, opts.mesh_samples, frame_seed(opts.seed, k));
-                (name, frame)
+            .flat_map(|(k, (name, bytes))| {
+                match Frame::all_from_bytes(
+                    &name,
+                    &bytes,
+                    opts.mesh_samples,
+                    frame_seed(opts.seed, k),
+                ) {
+                    Ok(frames) => frames
+                        .into_iter()
+                        .map(|f| (f.name.clone(), Ok(f)))
+                        .collect(),
+                    Err(e) => vec![(name, Err(e))],
+                }
             })
             .collect()
     }
@@ -391,12 +486,14 @@ impl Sequence {
             method,
             ..Default::default()
         };
-        for (k, p) in paths.iter().enumerate() {
-            let full = Frame::from_path(p, opts.mesh_samples, frame_seed(opts.seed, k))?;
-            let (w, kept) = full.downsample(working_size, method, frame_seed(seed, k));
-            out.original_sizes.push(full.points.len());
-            out.kept.push(kept);
-            out.sequence.frames.push(w);
+        for (f, p) in paths.iter().enumerate() {
+            for full in Frame::all_from_path(p, opts.mesh_samples, frame_seed(opts.seed, f))? {
+                let k = out.sequence.frames.len();
+                let (w, kept) = full.downsample(working_size, method, frame_seed(seed, k));
+                out.original_sizes.push(full.points.len());
+                out.kept.push(kept);
+                out.sequence.frames.push(w);
+            }
         }
         out.sequence = Sequence::from_frames(out.sequence.frames)?;
         Ok(out)

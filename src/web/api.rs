@@ -112,14 +112,16 @@ fn options_from_js(options: JsValue) -> Result<FitOptions, JsError> {
 
 // ------------------------------------------------------------------ loading
 
-/// Parses PLY files given as parallel arrays of names and `Uint8Array` bytes.
-/// Each file gets its own entry `{name, points, labels}` or `{name, error}` (the
-/// error names the file and the problem), in natural filename order.
+/// Parses frame files (PLY, PCD, NumPy, OBJ, text tables: `io::cloud_file`) given as
+/// parallel arrays of names and `Uint8Array` bytes. Each frame gets its own entry
+/// `{name, points, labels}` (a file of several frames one a frame, `walk.npy[0]`, …)
+/// and each bad file `{name, error}` (the error names the file and the problem), in
+/// natural filename order.
 #[wasm_bindgen]
-pub fn parse_plys(names: Vec<String>, buffers: Array) -> Result<Array, JsError> {
+pub fn parse_frames(names: Vec<String>, buffers: Array) -> Result<Array, JsError> {
     if names.len() != buffers.length() as usize {
         return Err(JsError::new(
-            "parse_plys: names and buffers differ in length",
+            "parse_frames: names and buffers differ in length",
         ));
     }
     let files: Vec<(String, Vec<u8>)> = names
@@ -141,6 +143,13 @@ pub fn parse_plys(names: Vec<String>, buffers: Array) -> Result<Array, JsError> 
         out.push(&o);
     }
     Ok(out)
+}
+
+/// A frame's name made a file stem for its exports (`f1.ply` → `f1`, `walk.npy[3]` →
+/// `walk_3`), as the CLI's `--ply-out` names them.
+#[wasm_bindgen]
+pub fn frame_stem(name: &str) -> String {
+    crate::io::cloud_file::frame_stem(name)
 }
 
 /// Indices that put `names` in natural order (`f2` before `f10`), as the core sorts files.

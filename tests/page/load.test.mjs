@@ -102,3 +102,50 @@ test('bad files show their error beside them and the others stay loaded', async 
   assert.deepEqual(errors, []);
   await context.close();
 });
+
+test('a NumPy stack loads as its frames, a folder of PCD frames without its notes', async () => {
+  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'gsart-formats-'));
+  // A helix moved along x from frame to frame: (T, N, 3) float32, as np.save writes it.
+  const T = 3, N = 300;
+  const pts = (k) => Array.from({ length: N }, (_, i) => {
+    const t = i / N;
+    return [Math.cos(9 * t) + 0.1 * k, Math.sin(7 * t), 2 * t - 1];
+  });
+  const data = Buffer.alloc(T * N * 12);
+  for (let k = 0; k < T; k++) pts(k).forEach((p, i) => p.forEach((v, c) => data.writeFloatLE(v, ((k * N + i) * 3 + c) * 4)));
+  let header = `{'descr': '<f4', 'fortran_order': False, 'shape': (${T}, ${N}, 3), }`;
+  header += ' '.repeat((64 - ((10 + header.length + 1) % 64)) % 64) + '\n';
+  const len = Buffer.alloc(2);
+  len.writeUInt16LE(header.length);
+  fs.writeFileSync(path.join(dir, 'walk.npy'), Buffer.concat([Buffer.from('\x93NUMPY\x01\x00', 'latin1'), len, Buffer.from(header), data]));
+
+  const { page, errors, context } = await newPage(browser);
+  await page.goto(`${srv.base}/`);
+  await waitLoaded(page);
+  await page.locator('#file-input').setInputFiles([path.join(dir, 'walk.npy')]);
+  await page.waitForFunction(() => !/reading/.test(document.querySelector('#sequence-summary').innerText)
+    && document.querySelectorAll('#frame-list li[data-index]').length === 3, null, { timeout: 20_000 });
+  assert.deepEqual(await page.locator('#frame-list .fname').allInnerTexts(), ['walk.npy[0]', 'walk.npy[1]', 'walk.npy[2]']);
+  assert.match(await page.locator('#frame-list li').first().innerText(), /300 pts/);
+  assert.match(await page.locator('#sequence-summary').innerText(), /3 frames/);
+  assert.equal(await page.locator('#btn-fit').isDisabled(), false);
+
+  // A folder of PCD frames with a note beside them: the frames are the PCD files.
+  const folder = path.join(dir, 'scan');
+  fs.mkdirSync(folder);
+  for (let k = 0; k < T; k++) {
+    const rows = pts(k).map((p) => p.map((v) => v.toFixed(5)).join(' '));
+    fs.writeFileSync(path.join(folder, `cloud_${k}.pcd`),
+      `# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH ${N}\nHEIGHT 1\nPOINTS ${N}\nDATA ascii\n${rows.join('\n')}\n`);
+  }
+  fs.writeFileSync(path.join(folder, 'notes.txt'), 'captured on a bench\n');
+  await page.locator('#folder-input').setInputFiles(folder);
+  await page.waitForFunction(() => !/reading/.test(document.querySelector('#sequence-summary').innerText)
+    && document.querySelectorAll('#frame-list li[data-index]').length === 3
+    && /cloud_0/.test(document.querySelector('#frame-list').innerText), null, { timeout: 20_000 });
+  assert.deepEqual(await page.locator('#frame-list .fname').allInnerTexts(), ['cloud_0.pcd', 'cloud_1.pcd', 'cloud_2.pcd']);
+  assert.equal(await page.locator('#frame-list .ferror').count(), 0);
+  await shot(page, 'load-formats');
+  assert.deepEqual(errors, []);
+  await context.close();
+});

@@ -40,6 +40,64 @@ fn ply_round_trip_and_errors_in_wasm() {
     );
 }
 
+/// The other frame formats in wasm, as the page's loader reads them: a NumPy stack
+/// in a deflated `.npz` (miniz_oxide) and an LZF-packed PCD give the same frames.
+#[wasm_bindgen_test]
+fn numpy_and_pcd_frames_in_wasm() {
+    use gsart::io::npy::write_npy;
+    use gsart::io::npz::write_npz;
+    use gsart::io::pcd::lzf_compress;
+    use gsart::io::sequence::{LoadOptions, Sequence};
+    let frames: Vec<Vec<Vec3>> = (0..3)
+        .map(|k| {
+            (0..64)
+                .map(|i| {
+                    let t = i as f32 * 0.1;
+                    Vec3::new(t.sin() + k as f32, t.cos(), 0.01 * (i % 7) as f32)
+                })
+                .collect()
+        })
+        .collect();
+    let le = |v: &[Vec3]| -> Vec<u8> {
+        v.iter()
+            .flat_map(|p| p.to_array())
+            .flat_map(|c| c.to_le_bytes())
+            .collect()
+    };
+    let all: Vec<Vec3> = frames.concat();
+    let npz = write_npz(
+        &[("points", write_npy("<f4", &[3, 64, 3], &le(&all)))],
+        true,
+    );
+    let mut soa = Vec::new();
+    for c in 0..3 {
+        frames[1]
+            .iter()
+            .for_each(|p| soa.extend_from_slice(&p[c].to_le_bytes()));
+    }
+    let packed = lzf_compress(&soa);
+    let mut pcd =
+        b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 64\nPOINTS 64\nDATA binary_compressed\n"
+            .to_vec();
+    pcd.extend_from_slice(&(packed.len() as u32).to_le_bytes());
+    pcd.extend_from_slice(&(soa.len() as u32).to_le_bytes());
+    pcd.extend_from_slice(&packed);
+    let loaded = Sequence::from_named_bytes(
+        vec![("walk.npz".into(), npz), ("one.pcd".into(), pcd)],
+        LoadOptions::default(),
+    );
+    let names: Vec<&str> = loaded.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(
+        names,
+        ["one.pcd", "walk.npz[0]", "walk.npz[1]", "walk.npz[2]"]
+    );
+    let seq = Sequence::from_loaded(loaded).unwrap();
+    assert_eq!(seq.frames[0].points, frames[1]);
+    for k in 0..3 {
+        assert_eq!(seq.frames[k + 1].points, frames[k]);
+    }
+}
+
 #[wasm_bindgen_test]
 fn metrics_in_wasm() {
     assert_eq!(rand_index(&[0, 0, 1, 1], &[5, 5, 7, 7]).unwrap(), 1.0);

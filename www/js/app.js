@@ -229,8 +229,16 @@ async function loadSequence({ name, files, gt = null, heldout = [], example = nu
     buffers,
     (msg) => {
       if (token !== S.loadToken || msg.type !== 'parsed') return;
-      const fr = S.frames.find((f) => f.name === msg.name && f.status);
-      if (!fr) return;
+      let fr = S.frames.find((f) => f.name === msg.name && f.status);
+      if (!fr) {
+        // A file of several frames (a NumPy stack, `walk.npy[3]`): its frames go in
+        // before its row, in order; the row goes once the file is read.
+        const i = S.frames.findIndex((f) => f.status && msg.name.startsWith(`${f.name}[`));
+        if (i < 0) return;
+        S.frames[i].many = true;
+        fr = { name: msg.name, points: null, labels: null, error: null, status: 'reading…' };
+        S.frames.splice(i, 0, fr);
+      }
       fr.status = null;
       if (msg.error) fr.error = msg.error;
       else { fr.points = msg.points; fr.labels = msg.labels; }
@@ -246,6 +254,7 @@ async function loadSequence({ name, files, gt = null, heldout = [], example = nu
     return;
   }
   if (token !== S.loadToken) return;
+  S.frames = S.frames.filter((f) => !f.many);
   afterLoad(note);
 }
 
@@ -1349,7 +1358,7 @@ function exportPly() {
   const names = goodFrames().map((f) => f.name);
   try {
     for (let k = 0; k < n; k++) {
-      const base = (names[k] || `frame_${String(k).padStart(3, '0')}.ply`).replace(/\.ply$/i, '');
+      const base = wasm.frame_stem(names[k] || `frame_${String(k).padStart(3, '0')}.ply`);
       files.push({ name: `${base}_parts.ply`, bytes: S.model.segmented_ply(k) });
     }
   } catch (e) { toast(errText(e), 'error', 8000); return; }

@@ -1,4 +1,4 @@
-// Gathering what the user dropped or picked: PLY frames (from files or a folder,
+// Gathering what the user dropped or picked: frame files (from files or a folder,
 // folders read recursively through webkitGetAsEntry), an optional gt.json and
 // heldout/ clouds beside them, or a result JSON to open directly.
 
@@ -47,6 +47,9 @@ export function entriesFromInput(input) {
   return [...input.files].map((f) => ({ file: f, path: f.webkitRelativePath || f.name }));
 }
 
+/** The extensions read as frames, in the order a folder's formats are preferred. */
+export const FRAME_EXTENSIONS = ['ply', 'pcd', 'npy', 'npz', 'obj', 'xyz', 'pts', 'csv', 'txt'];
+
 const dirOf = (p) => (p.includes('/') ? p.slice(0, p.lastIndexOf('/')) : '');
 const baseOf = (p) => p.slice(p.lastIndexOf('/') + 1);
 const isHidden = (p) => p.split('/').some((s) => s.startsWith('.') || s === '__MACOSX');
@@ -56,8 +59,10 @@ const isHidden = (p) => p.split('/').some((s) => s.startsWith('.') || s === '__M
  *   {kind: 'result', entry}
  *   {kind: 'sequence', frames: Entry[], gt: Entry|null, heldout: Entry[], folder, note}
  *   {kind: 'empty', message}
- * Explicitly chosen non-PLY files (a zip, an OBJ) are kept as frames so the core
- * names the problem beside them; inside folders only .ply files count.
+ * Explicitly chosen files of any kind (a zip) are kept as frames so the core names
+ * the problem beside them; inside folders the frames are the files of the first
+ * format of FRAME_EXTENSIONS the folder has (the core's rule,
+ * `io::cloud_file::FRAME_EXTENSIONS`), so notes beside PLY frames are no frames.
  */
 export function classify(entries) {
   entries = entries.filter((e) => !isHidden(e.path));
@@ -69,15 +74,19 @@ export function classify(entries) {
     const gt = jsons.find((e) => baseOf(e.path).toLowerCase() === 'gt.json');
     const res = jsons.find((e) => e !== gt);
     if (res) return { kind: 'result', entry: res };
-    return { kind: 'empty', message: 'gt.json alone is not a sequence: drop it together with the PLY frames.' };
+    return { kind: 'empty', message: 'gt.json alone is not a sequence: drop it together with the frames.' };
   }
 
   let candidates = others;
-  if (fromFolder) candidates = others.filter((e) => /\.ply$/i.test(e.path));
-  if (!candidates.length) {
-    return { kind: 'empty', message: fromFolder ? 'No .ply files in that folder.' : 'Nothing to load.' };
+  if (fromFolder) {
+    const ext = (e) => (/\.([^./]+)$/.exec(e.path)?.[1] ?? '').toLowerCase();
+    const first = FRAME_EXTENSIONS.find((x) => others.some((e) => ext(e) === x));
+    candidates = first ? others.filter((e) => ext(e) === first) : [];
   }
-  // Frames are the PLY files of the shallowest folder (not a heldout/ folder).
+  if (!candidates.length) {
+    return { kind: 'empty', message: fromFolder ? `No frame files (.${FRAME_EXTENSIONS.join(', .')}) in that folder.` : 'Nothing to load.' };
+  }
+  // Frames are the frame files of the shallowest folder (not a heldout/ folder).
   const dirs = new Map();
   for (const e of candidates) {
     const d = dirOf(e.path);
@@ -91,7 +100,7 @@ export function classify(entries) {
   const top = [...dirs.keys()].filter((d) => depth(d) === minDepth);
   let note = '';
   if (top.length > 1) {
-    note = `Several folders hold PLY files (${top.slice(0, 4).join(', ')}${top.length > 4 ? ', …' : ''}); loaded “${top[0]}”. Drop one sequence folder at a time.`;
+    note = `Several folders hold frame files (${top.slice(0, 4).join(', ')}${top.length > 4 ? ', …' : ''}); loaded “${top[0]}”. Drop one sequence folder at a time.`;
   }
   const folder = top[0];
   const frames = dirs.get(folder);
