@@ -158,7 +158,9 @@ pub fn read_pcd(bytes: &[u8], file: &str) -> Result<PlyCloud> {
     }
     let n = match (points, width) {
         (Some(p), _) => p,
-        (None, Some(w)) => w * height,
+        (None, Some(w)) => w
+            .checked_mul(height)
+            .ok_or_else(|| input(file, "WIDTH × HEIGHT is too large"))?,
         (None, None) => return Err(input(file, "the PCD header gives neither POINTS nor WIDTH")),
     };
     let find = |names: &[&str]| fields.iter().position(|f| names.contains(&f.name.as_str()));
@@ -174,8 +176,15 @@ pub fn read_pcd(bytes: &[u8], file: &str) -> Result<PlyCloud> {
     let mut offsets = Vec::with_capacity(nf);
     let mut record = 0usize;
     for f in &fields {
+        if f.count == 0 {
+            return Err(input(file, format!("field '{}' has COUNT 0", f.name)));
+        }
         offsets.push(record);
-        record += f.size * f.count;
+        record = f
+            .size
+            .checked_mul(f.count)
+            .and_then(|b| b.checked_add(record))
+            .ok_or_else(|| input(file, format!("field '{}' has too large a COUNT", f.name)))?;
     }
     let body = &bytes[at..];
     // The most points the body can hold (an ascii point takes at least 2 bytes, LZF

@@ -48,12 +48,13 @@ fn numpy_and_pcd_frames_in_wasm() {
     use gsart::io::npz::write_npz;
     use gsart::io::pcd::lzf_compress;
     use gsart::io::sequence::{LoadOptions, Sequence};
+    use gsart::math::Libm;
     let frames: Vec<Vec<Vec3>> = (0..3)
         .map(|k| {
             (0..64)
                 .map(|i| {
                     let t = i as f32 * 0.1;
-                    Vec3::new(t.sin() + k as f32, t.cos(), 0.01 * (i % 7) as f32)
+                    Vec3::new(t.lsin() + k as f32, t.lcos(), 0.01 * (i % 7) as f32)
                 })
                 .collect()
         })
