@@ -149,3 +149,64 @@ test('a NumPy stack loads as its frames, a folder of PCD frames without its note
   assert.deepEqual(errors, []);
   await context.close();
 });
+
+test('a sequence online (?frames=URL…&gt=URL&fit=1) is fitted, and its link and embed code point at it', { timeout: 300_000 }, async () => {
+  // The laptop example's frames and ground truth, put "online" as PCD files with labels.
+  const { page: gen, context: genCtx } = await newPage(browser);
+  await gen.goto(`${srv.base}/?example=laptop`);
+  await waitLoaded(gen);
+  const ex = await gen.evaluate(() => {
+    const s = window.gsart.state;
+    return {
+      gt: typeof s.gt === 'string' ? s.gt : JSON.stringify(s.gt),
+      frames: s.frames.map((f) => ({ points: Array.from(f.points), labels: Array.from(f.labels) })),
+    };
+  });
+  await genCtx.close();
+  const pcds = ex.frames.map((f) => {
+    const n = f.labels.length;
+    const rows = f.labels.map((l, i) => `${f.points[3 * i]} ${f.points[3 * i + 1]} ${f.points[3 * i + 2]} ${l}`);
+    return `# .PCD v0.7\nVERSION 0.7\nFIELDS x y z label\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH ${n}\nHEIGHT 1\nPOINTS ${n}\nDATA ascii\n${rows.join('\n')}\n`;
+  });
+  const { page, errors, context } = await newPage(browser);
+  await context.route((url) => url.pathname.startsWith('/shared/'), (r) => {
+    const file = new URL(r.request().url()).pathname.slice('/shared/'.length);
+    if (file === 'gt.json') return r.fulfill({ body: ex.gt, contentType: 'application/json' });
+    const k = /^cloud_(\d+)\.pcd$/.exec(file)?.[1];
+    return k === undefined ? r.fulfill({ status: 404 }) : r.fulfill({ body: pcds[Number(k)] });
+  });
+  await page.addInitScript(() => {
+    window.copied = [];
+    Object.defineProperty(navigator, 'clipboard', { value: { writeText: async (s) => { window.copied.push(s); } } });
+  });
+  const frames = pcds.map((_, k) => `frames=/shared/cloud_${k}.pcd`).join('&');
+  await page.goto(`${srv.base}/?${frames}&gt=/shared/gt.json&fit=1&quality=fast&parts=2..4`);
+  await waitLoaded(page);
+  await page.waitForFunction(() => /Done in/.test(document.querySelector('#fit-status').innerText), null, { timeout: 240_000 });
+  assert.match(await page.locator('#sequence-summary').innerText(), new RegExp(`${pcds.length} frames[\\s\\S]*ground truth`));
+  const m = await page.evaluate(() => ({ joints: window.gsart.state.model.joints().length, ted: window.gsart.state.metrics?.tree_edit_distance }));
+  assert.deepEqual(m, { joints: 1, ted: 0 }, 'the laptop\'s hinge, scored against the ground truth it was given');
+
+  await page.locator('#btn-share').click();
+  await page.locator('#btn-embed').click();
+  await page.waitForFunction(() => window.copied.length === 2);
+  const [link, embed] = await page.evaluate(() => window.copied);
+  const sp = new URL(link).searchParams;
+  assert.deepEqual(sp.getAll('frames'), pcds.map((_, k) => `${srv.base}/shared/cloud_${k}.pcd`));
+  assert.equal(sp.get('gt'), `${srv.base}/shared/gt.json`);
+  assert.equal(sp.get('quality'), 'fast');
+  assert.equal(sp.get('fit'), null, 'a link opens the frames with the fit settings');
+  const src = new URL(embed.match(/^<iframe src="([^"]+)"/)[1].replace(/&amp;/g, '&'));
+  assert.equal(src.searchParams.get('fit'), '1', 'a figure fits them in the visitor\'s browser');
+  assert.equal(src.searchParams.getAll('frames').length, pcds.length);
+  assert.match(await page.locator('#toast').innerText(), /fits the frames in the visitor's browser/);
+
+  // A frame that is not there says which and why.
+  const bad = await newPage(browser);
+  await bad.page.goto(`${srv.base}/?frames=/missing/walk.npz&embed=1`);
+  await waitLoaded(bad.page);
+  assert.match(await bad.page.locator('#view-message').innerText(), /Could not open the frames[\s\S]*\/missing\/walk\.npz: HTTP 404/);
+  await bad.context.close();
+  assert.deepEqual(errors, []);
+  await context.close();
+});

@@ -39,6 +39,7 @@ const S = {
   model: null, // wasm Model
   modelSource: '', // 'fit' | 'file' | 'url'
   modelUrl: null,
+  framesUrls: null, // {frames: [URL], gt: URL or null} when the frames came from ?frames=
   states: null,
   frameStates: null,
   playing: false,
@@ -204,12 +205,14 @@ function cancelFit(silent = false) {
 }
 
 /** Replaces the sequence with named PLY byte buffers; parses them in a worker. */
-async function loadSequence({ name, files, gt = null, heldout = [], example = null, note = '' }) {
+async function loadSequence({ name, files, gt = null, heldout = [], example = null, note = '', urls = null }) {
   cancelFit(true);
   resetResult();
   const token = ++S.loadToken;
   S.seqName = name;
   S.example = example;
+  // Where the frames came from when they are online (`?frames=`), for links to them.
+  S.framesUrls = urls;
   S.gt = gt;
   S.heldout = null;
   S.current = 0;
@@ -399,6 +402,7 @@ async function loadExample(name, { seed = null } = {}) {
   resetResult();
   S.seqName = `${name} (example)`;
   S.example = name;
+  S.framesUrls = null;
   S.exampleSeed = seed;
   S.gt = ex.gt;
   S.frames = ex.frames.map((f) => ({ name: f.name, points: f.points, labels: f.labels ?? null, error: null, status: null }));
@@ -1449,13 +1453,13 @@ async function exportVideo() {
 
 /**
  * The link that opens what is on view: `?model=URL` for a model opened from a URL (or
- * `model`, given), `?example=NAME` for an example (with `fit=1` when `fitted`), the
- * camera in the hash. Null for frames or a result that came from this machine, which
- * have no URL.
+ * `model`, given), `?example=NAME` for an example and `?frames=URL` for frames opened
+ * from URLs (with `fit=1` when `fitted`), the camera in the hash. Null for frames or a
+ * result that came from this machine, which have no URL.
  */
 function shareUrl({ fitted = false, model = null } = {}) {
   const url = new URL(location.href);
-  for (const k of ['model', 'example', 'fit', 'embed', ...SETTING_KEYS]) url.searchParams.delete(k);
+  for (const k of ['model', 'example', 'frames', 'gt', 'fit', 'embed', ...SETTING_KEYS]) url.searchParams.delete(k);
   if (S.view) {
     const h = new URLSearchParams();
     h.set('cam', S.view.cameraState());
@@ -1471,6 +1475,13 @@ function shareUrl({ fitted = false, model = null } = {}) {
       writeSettings(url, S.fitOpts, S.exampleSeed);
       if (fitted) url.searchParams.set('fit', '1');
     } else writeSettings(url, { ...DEFAULTS, seed: S.exampleSeed ?? 0 });
+  } else if (S.framesUrls && (!S.model || S.modelSource === 'fit')) {
+    for (const u of S.framesUrls.frames) url.searchParams.append('frames', u);
+    if (S.framesUrls.gt) url.searchParams.set('gt', S.framesUrls.gt);
+    if (S.model && S.fitOpts) {
+      writeSettings(url, S.fitOpts);
+      if (fitted) url.searchParams.set('fit', '1');
+    }
   } else return null;
   return url;
 }
@@ -1504,7 +1515,8 @@ async function copyLink() {
  */
 async function copyEmbed() {
   let url = shareUrl({ fitted: true });
-  let note = url?.searchParams.get('fit') === '1' ? 'The figure fits the example in the visitor\'s browser, with this fit\'s settings.' : '';
+  const fitted = S.framesUrls ? 'frames' : 'example';
+  let note = url?.searchParams.get('fit') === '1' ? `The figure fits the ${fitted} in the visitor's browser, with this fit's settings.` : '';
   if (!url) {
     if (!S.model) { toast('Nothing to embed yet: fit the frames first, or open a model.', 'error', 6000); return; }
     const file = `${exportName()}.gsart.json`;
@@ -1669,23 +1681,57 @@ function renderExamples() {
   }
 }
 
+/** The response of `url`, or an error that says why there is none. */
+async function fetchOk(url) {
+  let res;
+  try {
+    res = await fetch(url);
+  } catch (e) {
+    // fetch rejects with a TypeError, and no status, when the network or CORS stops it.
+    throw new Error(`${url}: ${errText(e)} (the server is unreachable or does not allow other sites to read the file: it needs CORS)`);
+  }
+  if (!res.ok) throw new Error(`${url}: HTTP ${res.status} ${res.statusText}`);
+  return res;
+}
+
+const urlName = (url) => basename(new URL(url, location.href).pathname);
+
 async function openModelUrl(url) {
   $('sequence-summary').innerHTML = `<span class="muted">Opening ${escapeHtml(url)}…</span>`;
   try {
-    const res = await fetch(url);
-    if (!res.ok) throw new Error(`HTTP ${res.status} ${res.statusText}`);
-    const text = await res.text();
+    const text = await (await fetchOk(url)).text();
     $('sequence-summary').textContent = '';
-    if (openResult(text, basename(new URL(url, location.href).pathname) || 'model', 'url')) S.modelUrl = url;
+    if (openResult(text, urlName(url) || 'model', 'url')) S.modelUrl = url;
   } catch (e) {
     $('sequence-summary').textContent = '';
-    // fetch rejects with a TypeError, and no status, when the network or CORS stops it.
-    const why = e instanceof TypeError
-      ? `${errText(e)} (the server is unreachable or does not allow other sites to read the file: it needs CORS)`
-      : errText(e);
-    if (EMBED) viewMessage('Could not open the model', `${url}: ${why}`);
-    else toast(`Could not open ${url}: ${why}`, 'error', 10000);
+    if (EMBED) viewMessage('Could not open the model', errText(e));
+    else toast(`Could not open the model: ${errText(e)}`, 'error', 10000);
   }
+}
+
+/**
+ * `?frames=URL` (repeatable; one `.npz`/`.npy` can hold the whole sequence) and
+ * `gt=URL`: a sequence put online, loaded as dropped files are, then fitted when the
+ * link says `fit=1` — a figure that fits the authors' own data in the visitor's browser.
+ */
+async function openFramesUrls(urls, gtUrl) {
+  const what = urls.length === 1 ? escapeHtml(urls[0]) : `${urls.length} files`;
+  $('sequence-summary').innerHTML = `<span class="muted">Downloading ${what}…</span>`;
+  let files;
+  let gt = null;
+  try {
+    files = await Promise.all(urls.map(async (u) => ({ name: urlName(u) || 'frames', bytes: await (await fetchOk(u)).arrayBuffer() })));
+    if (gtUrl) gt = await (await fetchOk(gtUrl)).text();
+  } catch (e) {
+    $('sequence-summary').textContent = '';
+    if (EMBED) viewMessage('Could not open the frames', errText(e));
+    else toast(`Could not open the frames: ${errText(e)}`, 'error', 10000);
+    return;
+  }
+  const first = new URL(urls[0], location.href).pathname;
+  const name = urls.length === 1 ? files[0].name : (basename(first.slice(0, first.lastIndexOf('/'))) || 'Sequence');
+  const abs = (u) => new URL(u, location.href).toString();
+  await loadSequence({ name, files, gt, urls: { frames: urls.map(abs), gt: gtUrl ? abs(gtUrl) : null } });
 }
 
 /** Sets the fit form from the link's settings (`settings.js`); says which were ignored. */
@@ -1732,9 +1778,11 @@ async function main() {
   document.body.dataset.ready = '1';
   const model = params.get('model');
   const example = params.get('example');
+  const frames = params.getAll('frames').filter(Boolean);
   if (model) await openModelUrl(model);
+  else if (frames.length) await openFramesUrls(frames, params.get('gt'));
   else if (example) await loadExample(example, { seed: exampleSeed(params, Number($('seed').value) || 0) });
-  else if (EMBED) viewMessage('Nothing to show', 'An embedded GSArt figure needs ?model=URL (a result JSON) or ?example=NAME.');
+  else if (EMBED) viewMessage('Nothing to show', 'An embedded GSArt figure needs ?model=URL (a result JSON), ?frames=URL (a sequence online) or ?example=NAME.');
   else setStepActive('step-load');
   if (PLAY && !S.fitRunning && !S.playing) play();
   document.body.dataset.loaded = '1';
