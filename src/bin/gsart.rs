@@ -29,9 +29,11 @@ mod cli {
 
     #[derive(Subcommand)]
     enum Command {
-        /// Fit an articulated model to a sequence (a folder of PLY frames, or PLY files).
+        /// Fit an articulated model to a sequence (a folder of frames, or frame files:
+        /// PLY, PCD, NumPy .npy/.npz, OBJ, .xyz/.csv/.txt).
         Fit {
-            /// A sequence folder, or two or more PLY files (natural filename order).
+            /// A sequence folder, or frame files in natural filename order (one .npy/.npz
+            /// may hold the whole sequence).
             #[arg(required = true)]
             input: Vec<PathBuf>,
             /// Range of Gaussian counts to try, e.g. `10..15` or `8` (default: from the data).
@@ -79,7 +81,7 @@ mod cli {
         Edit {
             /// The result to edit (JSON from `gsart fit`, the page or another tool).
             result: PathBuf,
-            /// The sequence the result was fitted to: a folder, or its PLY files.
+            /// The sequence the result was fitted to: a folder, or its frame files.
             #[arg(required = true)]
             input: Vec<PathBuf>,
             /// Parts to join, by their numbers in RESULT, e.g. `--join 3,5`; repeat for
