@@ -83,7 +83,16 @@ pub fn relabel(
             let cost_of = |p: usize, bound: f32| -> f32 {
                 let mut sum = 0.0f32;
                 for ((r, c), &t) in motions[p].iter().zip(&others) {
-                    sum += grids[t].nearest_d2_capped(*r * *x + *c, cap2);
+                    // Only a distance below what is left of the bound can matter, so
+                    // the search is capped there too: fewer cells, the same decision
+                    // (frames of many points, where this runs over every input point).
+                    let left = bound - sum;
+                    let cap = cap2.min(left);
+                    let d2 = grids[t].nearest_d2_capped(*r * *x + *c, cap);
+                    if cap < cap2 && d2 >= cap {
+                        return bound;
+                    }
+                    sum += d2;
                     if sum >= bound {
                         break;
                     }
