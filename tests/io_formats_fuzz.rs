@@ -9,6 +9,9 @@ use gsart::io::sequence::Frame;
 use gsart::math::Libm;
 use proptest::prelude::*;
 
+mod io_common;
+use io_common::{apply, Mutation};
+
 fn points() -> Vec<Vec3> {
     (0..24)
         .map(|i| {
@@ -104,32 +107,6 @@ fn exercise(name: &str, bytes: &[u8]) {
             "error does not name the file: {e}"
         );
     }
-}
-
-#[derive(Debug, Clone)]
-enum Mutation {
-    Truncate(usize),
-    Flip(usize, u8),
-    Insert(usize, Vec<u8>),
-}
-
-fn apply(mut bytes: Vec<u8>, ms: &[Mutation]) -> Vec<u8> {
-    for m in ms {
-        match m {
-            Mutation::Truncate(at) => bytes.truncate(at % bytes.len().max(1)),
-            Mutation::Flip(at, x) => {
-                if !bytes.is_empty() {
-                    let i = at % bytes.len();
-                    bytes[i] ^= *x | 1;
-                }
-            }
-            Mutation::Insert(at, data) => {
-                let i = at % (bytes.len() + 1);
-                bytes.splice(i..i, data.iter().copied());
-            }
-        }
-    }
-    bytes
 }
 
 fn mutation() -> impl Strategy<Value = Mutation> {

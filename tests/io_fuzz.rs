@@ -81,51 +81,6 @@ fn exercise(bytes: &[u8]) {
     let _ = Frame::from_bytes("fuzz.ply", bytes, 64, 1);
 }
 
-#[derive(Debug, Clone)]
-enum Mutation {
-    Truncate(usize),
-    Flip(usize, u8),
-    Insert(usize, Vec<u8>),
-    /// Replace header line `i` (0-based) with the given text.
-    Line(usize, String),
-}
-
-fn apply(mut bytes: Vec<u8>, ms: &[Mutation]) -> Vec<u8> {
-    for m in ms {
-        let n = bytes.len().max(1);
-        match m {
-            Mutation::Truncate(at) => bytes.truncate(at % n),
-            Mutation::Flip(at, x) => {
-                if !bytes.is_empty() {
-                    let i = at % bytes.len();
-                    bytes[i] ^= *x | 1;
-                }
-            }
-            Mutation::Insert(at, data) => {
-                let i = at % (bytes.len() + 1);
-                bytes.splice(i..i, data.iter().copied());
-            }
-            Mutation::Line(i, text) => {
-                let end = bytes
-                    .windows(11)
-                    .position(|w| w == b"end_header\n")
-                    .map_or(0, |p| p + 11);
-                let header = String::from_utf8_lossy(&bytes[..end]).into_owned();
-                let mut lines: Vec<String> = header.lines().map(str::to_string).collect();
-                if !lines.is_empty() {
-                    let k = i % lines.len();
-                    lines[k] = text.clone();
-                    let mut new = lines.join("\n").into_bytes();
-                    new.push(b'\n');
-                    new.extend_from_slice(&bytes[end..]);
-                    bytes = new;
-                }
-            }
-        }
-    }
-    bytes
-}
-
 fn header_line() -> impl Strategy<Value = String> {
     prop_oneof![
         Just("element vertex 4294967295".to_string()),

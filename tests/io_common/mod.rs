@@ -1,6 +1,6 @@
 //! Helpers shared by the io integration tests: a tiny PLY encoder that can express
-//! any layout (types, orders, lists, extra elements) in all three formats, and
-//! temporary folders.
+//! any layout (types, orders, lists, extra elements) in all three formats,
+//! temporary folders, and the property tests' mutations of valid files.
 #![allow(dead_code)]
 
 use gsart::math::Libm;
@@ -155,4 +155,51 @@ pub fn bench_dev() -> Option<PathBuf> {
         eprintln!("note: no shared/bench-dev/full folder here; skipping the bench-dev checks");
     }
     found
+}
+
+/// A change to a valid file, for the property tests: cut, flip a byte, insert bytes,
+/// or (PLY) replace header line `i`.
+#[derive(Debug, Clone)]
+pub enum Mutation {
+    Truncate(usize),
+    Flip(usize, u8),
+    Insert(usize, Vec<u8>),
+    /// Replace header line `i` (0-based) with the given text.
+    Line(usize, String),
+}
+
+pub fn apply(mut bytes: Vec<u8>, ms: &[Mutation]) -> Vec<u8> {
+    for m in ms {
+        let n = bytes.len().max(1);
+        match m {
+            Mutation::Truncate(at) => bytes.truncate(at % n),
+            Mutation::Flip(at, x) => {
+                if !bytes.is_empty() {
+                    let i = at % bytes.len();
+                    bytes[i] ^= *x | 1;
+                }
+            }
+            Mutation::Insert(at, data) => {
+                let i = at % (bytes.len() + 1);
+                bytes.splice(i..i, data.iter().copied());
+            }
+            Mutation::Line(i, text) => {
+                let end = bytes
+                    .windows(11)
+                    .position(|w| w == b"end_header\n")
+                    .map_or(0, |p| p + 11);
+                let header = String::from_utf8_lossy(&bytes[..end]).into_owned();
+                let mut lines: Vec<String> = header.lines().map(str::to_string).collect();
+                if !lines.is_empty() {
+                    let k = i % lines.len();
+                    lines[k] = text.clone();
+                    let mut new = lines.join("\n").into_bytes();
+                    new.push(b'\n');
+                    new.extend_from_slice(&bytes[end..]);
+                    bytes = new;
+                }
+            }
+        }
+    }
+    bytes
 }
