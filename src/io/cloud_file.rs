@@ -19,7 +19,8 @@ use crate::error::Result;
 
 /// The extensions read as frames, in the order a folder's formats are preferred: a
 /// folder's frames are its files of the first of these it has (so a `notes.txt`
-/// beside PLY frames is not a frame).
+/// beside PLY frames is not a frame). The page's `www/js/files.js` holds the same
+/// list: it sorts a drop before a worker has the wasm.
 pub const FRAME_EXTENSIONS: [&str; 9] = [
     "ply", "pcd", "npy", "npz", "obj", "xyz", "pts", "csv", "txt",
 ];
