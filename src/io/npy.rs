@@ -207,13 +207,12 @@ pub fn read_labels(labels: &Array, points: &Array, file: &str) -> Result<Option<
             } else {
                 labels.at(&[i])
             };
-            if !(0.0..=u32::MAX as f64).contains(&v) {
-                return Err(input(
-                    file,
-                    format!("part label {v} is negative or too large"),
-                ));
-            }
-            l.push(v as u32);
+            // An integer array's values are whole numbers: only the range can fail.
+            l.push(
+                super::ply::part_label(v).ok_or_else(|| {
+                    input(file, format!("part label {v} is negative or too large"))
+                })?,
+            );
         }
         out.push(l);
     }

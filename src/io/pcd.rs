@@ -8,7 +8,7 @@
 
 use glam::Vec3;
 
-use super::ply::PlyCloud;
+use super::ply::{part_label, PlyCloud};
 use crate::error::{Error, Result};
 
 fn input(file: &str, problem: impl Into<String>) -> Error {
@@ -312,13 +312,12 @@ pub fn read_pcd(bytes: &[u8], file: &str) -> Result<PlyCloud> {
             .push(Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32));
         if let (Some(out), Some(l)) = (cloud.labels.as_mut(), labels.as_ref()) {
             let v = l[p];
-            if !(0.0..=u32::MAX as f64).contains(&v) || v.fract() != 0.0 {
-                return Err(input(
+            out.push(part_label(v).ok_or_else(|| {
+                input(
                     file,
                     format!("point {p}: part label {v} is not a non-negative integer"),
-                ));
-            }
-            out.push(v as u32);
+                )
+            })?);
         }
     }
     Ok(cloud)

@@ -449,13 +449,13 @@ impl Body {
                     format!("negative part label {l} at vertex {idx}"),
                 ));
             }
-            if l.fract() != 0.0 || l > u32::MAX as f64 || l.is_nan() {
-                return Err(input(
+            let l = part_label(l).ok_or_else(|| {
+                input(
                     file,
                     format!("part label {l} at vertex {idx} is not a non-negative integer"),
-                ));
-            }
-            labels.push(l as u32);
+                )
+            })?;
+            labels.push(l);
         }
         Ok(())
     }
@@ -887,6 +887,12 @@ fn describe_counts(h: &Header) -> String {
 }
 
 // ---------------------------------------------------------------- validation
+
+/// A ground-truth part id read as a number (every frame format's labels): a
+/// non-negative integer that fits u32, else `None`.
+pub(crate) fn part_label(v: f64) -> Option<u32> {
+    ((0.0..=u32::MAX as f64).contains(&v) && v.fract() == 0.0).then_some(v as u32)
+}
 
 /// Checks that a point cloud is usable as a frame: at least [`MIN_POINTS`] points,
 /// all finite, not all identical, not all in one plane (or on one line).

@@ -10,7 +10,7 @@
 
 use glam::Vec3;
 
-use super::ply::PlyCloud;
+use super::ply::{part_label, PlyCloud};
 use crate::error::{Error, Result};
 
 fn input(file: &str, problem: impl Into<String>) -> Error {
@@ -104,13 +104,12 @@ pub fn read_text_cloud(bytes: &[u8], file: &str) -> Result<PlyCloud> {
             .push(Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32));
         if let (Some(c), Some(out)) = (label, cloud.labels.as_mut()) {
             let l = v(c)?;
-            if !(0.0..=u32::MAX as f64).contains(&l) || l.fract() != 0.0 {
-                return Err(input(
+            out.push(part_label(l).ok_or_else(|| {
+                input(
                     file,
                     format!("line {n}: part label {l} is not a non-negative integer"),
-                ));
-            }
-            out.push(l as u32);
+                )
+            })?);
         }
     }
     Ok(cloud)
