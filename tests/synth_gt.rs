@@ -91,8 +91,15 @@ fn labels(f: &Frame) -> &[u32] {
 
 #[test]
 fn every_kind_has_consistent_ground_truth() {
-    for kind in ObjectKind::ALL {
-        let o = opts(kind, 7);
+    // Each object as designed and in a random orientation (`random_rotation`).
+    for (kind, random_rotation) in ObjectKind::ALL
+        .into_iter()
+        .flat_map(|k| [(k, false), (k, true)])
+    {
+        let o = SynthOptions {
+            random_rotation,
+            ..opts(kind, 7)
+        };
         let out = gen(&o);
         let gt = &out.gt;
         let model = kind.model();
@@ -612,4 +619,69 @@ fn a_turntable_turns_every_frame_its_points_and_poses() {
         ..opts(ObjectKind::Laptop, 0)
     })
     .is_err());
+}
+
+/// `SynthOptions::random_rotation`: every frame is the designed object's frame turned by
+/// the drawn rotation (the same samples, normalised again), the joint axes turn with it,
+/// the rotation is uniform-looking across seeds, and `gt.json` records it.
+#[test]
+fn a_random_rotation_turns_the_whole_object() {
+    let still = gen(&opts(ObjectKind::Arm, 2));
+    let turned = gen(&SynthOptions {
+        random_rotation: true,
+        ..opts(ObjectKind::Arm, 2)
+    });
+    let r = turned.info.rotation.expect("the rotation drawn");
+    assert!(still.info.rotation.is_none());
+    assert!((r.determinant() - 1.0).abs() < 1e-12);
+    assert!((r * r.transpose()).abs_diff_eq(DMat3::IDENTITY, 1e-12));
+    // Design coordinates x: still p = s (x − c), turned q = s' (R x − c').
+    let (s, c) = (still.info.scale, still.info.center);
+    let (s2, c2) = (turned.info.scale, turned.info.center);
+    let design_to_turned = |p: DVec3| s2 * (r * (p / s + c) - c2);
+    for (a, b) in still.sequence.frames.iter().zip(&turned.sequence.frames) {
+        assert_eq!(a.labels, b.labels);
+        for (p, q) in a.points.iter().zip(&b.points) {
+            let e = design_to_turned(p.as_dvec3()).distance(q.as_dvec3());
+            assert!(e < 1e-5, "{}: {e}", b.name);
+        }
+    }
+    for (a, b) in still.gt.joints.iter().zip(&turned.gt.joints) {
+        let (Some(a), Some(b)) = (a, b) else {
+            assert!(a.is_none() && b.is_none());
+            continue;
+        };
+        assert!((r * a.axis_world_frame0).distance(b.axis_world_frame0) < 1e-9);
+        let pivot = design_to_turned(a.pivot_world_frame0);
+        assert!(pivot.distance(b.pivot_world_frame0) < 1e-9);
+        assert_eq!(a.states, b.states, "revolute states do not scale");
+    }
+    // Different seeds, different orientations, none of them near the identity.
+    let angles: Vec<f64> = (0..6)
+        .map(|seed| {
+            let o = SynthOptions {
+                random_rotation: true,
+                ..opts(ObjectKind::Laptop, seed)
+            };
+            let rot = gen(&o).info.rotation.expect("rotation");
+            glam::DQuat::from_mat3(&rot).angle_between(glam::DQuat::IDENTITY)
+        })
+        .collect();
+    assert!(angles.iter().all(|a| *a > 1e-3), "{angles:?}");
+    assert!(
+        angles.windows(2).all(|w| (w[0] - w[1]).abs() > 1e-6),
+        "{angles:?}"
+    );
+    let json: serde_json::Value = serde_json::from_str(&gt_json(&turned)).unwrap();
+    assert_eq!(json["random_rotation"], true);
+    let m = &json["rotation"]["matrix"];
+    for i in 0..3 {
+        for j in 0..3 {
+            let v = m[i][j].as_f64().expect("matrix entry");
+            assert!((v - r.col(j)[i]).abs() < 1e-12);
+        }
+    }
+    let json: serde_json::Value = serde_json::from_str(&gt_json(&still)).unwrap();
+    assert_eq!(json["random_rotation"], false);
+    assert!(json.get("rotation").is_none());
 }

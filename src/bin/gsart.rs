@@ -144,6 +144,11 @@ mod cli {
             /// through its centre, as on a turntable (the poses turn with it).
             #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
             turn: f64,
+            /// Put the whole object in a random orientation (drawn from the seed, uniform
+            /// over rotations) before normalising it, as the benchmark generator's
+            /// `random_rotation`.
+            #[arg(long)]
+            random_rotation: bool,
             #[arg(long, default_value_t = 0)]
             seed: u64,
         },
@@ -291,6 +296,7 @@ mod cli {
                 noise,
                 outliers,
                 turn,
+                random_rotation,
                 seed,
             } => {
                 // The settings every object gets; `points` defaults per object.
@@ -301,6 +307,7 @@ mod cli {
                     noise,
                     outliers,
                     turn,
+                    random_rotation,
                     seed,
                     ..Default::default()
                 };

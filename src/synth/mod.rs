@@ -17,7 +17,7 @@ pub use write::{write_sequence_dir, write_sequence_dir_with};
 use std::fmt;
 use std::str::FromStr;
 
-use glam::{DMat3, DMat4, DVec3, Vec3};
+use glam::{DMat3, DMat4, DQuat, DVec3, Vec3};
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use serde_json::{json, Value};
 
@@ -146,6 +146,10 @@ pub struct SynthOptions {
     /// through its centre, as on a turntable (|turn| ≤ [`MAX_TURN`]; 0: still). The
     /// ground-truth poses turn with it; frame 0 and the held-out poses do not.
     pub turn: f64,
+    /// The whole object in an orientation drawn uniformly over all rotations (from the
+    /// seed) before the normalisation, as the benchmark generator's `random_rotation`:
+    /// the same object and motion, seen from no preferred axis.
+    pub random_rotation: bool,
     pub seed: u64,
 }
 
@@ -161,6 +165,7 @@ impl SynthOptions {
             noise: 0.0,
             outliers: 0.0,
             turn: 0.0,
+            random_rotation: false,
             seed: 0,
         }
     }
@@ -199,6 +204,9 @@ pub struct SynthInfo {
     pub outliers: f64,
     /// `SynthOptions::turn`.
     pub turn: f64,
+    /// The orientation `SynthOptions::random_rotation` drew (design to world, before
+    /// the normalisation), if any.
+    pub rotation: Option<DMat3>,
 }
 
 /// A generated sequence: observed frames (with part labels), ground truth, and
@@ -423,7 +431,14 @@ pub fn generate(opts: &SynthOptions) -> crate::Result<SynthOutput> {
         }
     }
     let at = |s: &Vec<Vec<f64>>, t: usize| s.iter().map(|v| v[t]).collect::<Vec<f64>>();
-    let root = DMat4::IDENTITY;
+    // The object's orientation: the identity, or one drawn uniformly over rotations
+    // (a normalised 4-D normal draw is a uniform unit quaternion).
+    let rotation = opts.random_rotation.then(|| {
+        let mut rot_rng = stream(opts.seed, 6);
+        let q = [(); 4].map(|_| normal(&mut rot_rng));
+        DMat3::from_quat(DQuat::from_xyzw(q[0], q[1], q[2], q[3]).normalize())
+    });
+    let root = rotation.map_or(DMat4::IDENTITY, DMat4::from_mat3);
     let poses: Vec<Vec<DMat4>> = (0..k)
         .map(|t| model.forward(root, &at(&states, t)))
         .collect();
@@ -606,6 +621,7 @@ pub fn generate(opts: &SynthOptions) -> crate::Result<SynthOutput> {
             noise: opts.noise,
             outliers: opts.outliers,
             turn: opts.turn,
+            rotation,
         },
     })
 }
@@ -648,7 +664,15 @@ pub fn gt_json(out: &SynthOutput) -> String {
                    "note": "frame t is turned by degrees_per_frame · t about the axis through the origin; the poses include it, frame 0 and the held-out poses are not turned"})
         },
     );
-    map.insert("random_rotation".into(), json!(false));
+    map.insert("random_rotation".into(), json!(info.rotation.is_some()));
+    if let Some(r) = info.rotation {
+        let row = |i: usize| json!([r.x_axis[i], r.y_axis[i], r.z_axis[i]]);
+        map.insert(
+            "rotation".into(),
+            json!({"matrix": [row(0), row(1), row(2)],
+                   "note": "the design-frame object was rotated by this row-major matrix (about the origin) before the normalisation"}),
+        );
+    }
     let counts = |f: &Frame| {
         let mut c = vec![0usize; np];
         for &l in f.labels.iter().flatten() {
