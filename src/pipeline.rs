@@ -354,8 +354,8 @@ pub struct SecondLook {
 /// Compares two finished fits, the best candidate by model selection and the runner-up:
 /// the runner-up is taken when the best leaves more than `SECOND_LOOK_RATIO` times its
 /// share of the points unexplained (`info.unexplained`) and the two counts of
-/// unexplained points differ by more than their noise (`SECOND_LOOK_SIGMAS`). `None` when either lacks the
-/// measure (occluded input, or a result from elsewhere).
+/// unexplained points differ by more than their noise (`SECOND_LOOK_SIGMAS`). `None`
+/// when either lacks the measure (occluded input, or a result from elsewhere).
 pub fn second_look(
     best: &crate::io::result::FitResult,
     runner: &crate::io::result::FitResult,

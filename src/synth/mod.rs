@@ -666,10 +666,9 @@ pub fn gt_json(out: &SynthOutput) -> String {
     );
     map.insert("random_rotation".into(), json!(info.rotation.is_some()));
     if let Some(r) = info.rotation {
-        let row = |i: usize| json!([r.x_axis[i], r.y_axis[i], r.z_axis[i]]);
         map.insert(
             "rotation".into(),
-            json!({"matrix": [row(0), row(1), row(2)],
+            json!({"matrix": r.transpose().to_cols_array_2d(),
                    "note": "the design-frame object was rotated by this row-major matrix (about the origin) before the normalisation"}),
         );
     }
